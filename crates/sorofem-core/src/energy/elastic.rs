@@ -1,0 +1,280 @@
+//! Neo-Hookean elasticity of linear tetrahedra, in the standard (displacement) and the mixed
+//! (displacement + pressure) formulation.
+//!
+//! Standard: `E_e = V_e psi(F_e)` with `psi = mu/2 (I1 - 3) - mu ln J + lambda/2 c(J)^2`.
+//!
+//! Mixed: the volumetric energy `lambda/2 c^2` is replaced by its perturbed-Lagrangian form
+//! `p c(J) - p^2 / (2 lambda)`, with `p` interpolated from nodal pressures (P1, continuous):
+//! `E_e = V_e [psi_mu(F_e) + q_e c(J_e)] - 1/2 p_e^T C_e p_e`, `q_e` the mean of the element's four
+//! nodal pressures and `C_e = M_e / lambda_e` its pressure mass (consistent
+//! `V/20 (1 + delta_ab)` or lumped `V/4 delta_ab`, m^3). Summed over elements this is
+//! `W_mu(x) + p^T phi(x) - 1/2 p^T C p` with the nodal constraint `phi_i = sum_e V_e/4 c(J_e)`.
+//! Eliminating p (`C p = phi`) gives back `W_mu + 1/2 phi^T C^{-1} phi`, which tends to the standard
+//! energy as the mesh is refined, so both formulations solve the same continuum model.
+
+use super::{add_tet_gradient, add_tet_hessian, HessianMode, Term};
+use crate::material::{project_to_psd, volumetric_tangent, NeoHookean, Tangent, Volumetric};
+use crate::mesh::TetMesh;
+use std::sync::Arc;
+
+/// The pressure mass matrix `M_p` of the mixed formulation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PressureMass {
+    /// `int N_a N_b dV`: the exact P1 mass matrix.
+    Consistent,
+    /// Row-summed: `V/4` per node and element; makes `C` diagonal.
+    Lumped,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Formulation {
+    Standard,
+    /// Nodal pressure unknowns start at full DOF index `pressure_offset` (= 3 n_nodes).
+    Mixed {
+        pressure_offset: usize,
+        mass: PressureMass,
+    },
+}
+
+/// Elastic energy of all tets. `mu` and `lambda` are per tet (Pa).
+pub struct ElasticTerm {
+    pub mesh: Arc<TetMesh>,
+    pub mu: Vec<f64>,
+    pub lambda: Vec<f64>,
+    pub volumetric: Volumetric,
+    pub formulation: Formulation,
+}
+
+impl ElasticTerm {
+    pub fn material(&self, e: usize) -> NeoHookean {
+        NeoHookean {
+            mu: self.mu[e],
+            lambda: self.lambda[e],
+            volumetric: self.volumetric,
+        }
+    }
+
+    /// Local pressure mass `C_e = M_e / lambda_e` entry (a, b).
+    fn compliance(&self, e: usize, a: usize, b: usize, mass: PressureMass) -> f64 {
+        let v = self.mesh.volumes()[e] / self.lambda[e];
+        match mass {
+            PressureMass::Consistent => v / 20.0 * if a == b { 2.0 } else { 1.0 },
+            PressureMass::Lumped => {
+                if a == b {
+                    v / 4.0
+                } else {
+                    0.0
+                }
+            }
+        }
+    }
+
+    /// `H = F - I = sum_a u_a g_a^T` from the element's nodal displacements (m). Working with
+    /// displacements and H rather than positions and F keeps the stress accurate to round-off
+    /// relative to |H|, so small loads converge to tight relative tolerances.
+    fn displacement_gradient(&self, e: usize, u: &[f64]) -> crate::material::Mat3 {
+        let g = self.mesh.shape_gradients(e);
+        let mut f = crate::material::Mat3::zeros();
+        for a in 0..4 {
+            let ua = nalgebra::Vector3::new(u[3 * a], u[3 * a + 1], u[3 * a + 2]);
+            f += ua * g[a].transpose();
+        }
+        f
+    }
+
+    fn standard_element(
+        &self,
+        e: usize,
+        z: &[f64],
+        grad: Option<&mut [f64]>,
+        hess: Option<&mut [f64]>,
+        mode: HessianMode,
+    ) -> f64 {
+        let h = self.displacement_gradient(e, z);
+        let Some(r) = self
+            .material(e)
+            .response_from_displacement_gradient(&h, hess.is_some())
+        else {
+            return f64::INFINITY;
+        };
+        let volume = self.mesh.volumes()[e];
+        let g = self.mesh.shape_gradients(e);
+        if let Some(grad) = grad {
+            grad.fill(0.0);
+            add_tet_gradient(volume, g, &r.stress, grad);
+        }
+        if let Some(hess) = hess {
+            hess.fill(0.0);
+            let tangent = r.tangent.expect("tangent requested");
+            let tangent = if mode == HessianMode::Projected {
+                project_to_psd(&tangent)
+            } else {
+                tangent
+            };
+            add_tet_hessian(volume, g, &tangent, hess, 12);
+        }
+        volume * r.energy
+    }
+
+    fn mixed_element(
+        &self,
+        e: usize,
+        z: &[f64],
+        grad: Option<&mut [f64]>,
+        hess: Option<&mut [f64]>,
+        mode: HessianMode,
+        mass: PressureMass,
+    ) -> f64 {
+        let h = self.displacement_gradient(e, z);
+        let Some(shear) = self
+            .material(e)
+            .shear_from_displacement_gradient(&h, hess.is_some())
+        else {
+            return f64::INFINITY;
+        };
+        let Some((gt, j)) =
+            crate::material::inverse_transpose(&(crate::material::Mat3::identity() + h))
+        else {
+            return f64::INFINITY;
+        };
+        let volume = self.mesh.volumes()[e];
+        let g = self.mesh.shape_gradients(e);
+        let p = &z[12..16];
+        let q = 0.25 * (p[0] + p[1] + p[2] + p[3]);
+        let (c, dc, d2c) = self
+            .volumetric
+            .measure_near_one(crate::material::neo_hookean::j_minus_one(&h));
+        let mut cp = [0.0; 4];
+        for a in 0..4 {
+            for b in 0..4 {
+                cp[a] += self.compliance(e, a, b, mass) * p[b];
+            }
+        }
+        let energy =
+            volume * (shear.energy + q * c) - 0.5 * (0..4).map(|a| p[a] * cp[a]).sum::<f64>();
+        // d(V c(J))/dx_b = V c'(J) J F^{-T} g_b, shared by the gradient and the coupling block.
+        let dvol_stress = dc * j * gt;
+        if let Some(grad) = grad {
+            grad.fill(0.0);
+            add_tet_gradient(volume, g, &(shear.stress + q * dvol_stress), grad);
+            for a in 0..4 {
+                grad[12 + a] = 0.25 * volume * c - cp[a];
+            }
+        }
+        if let Some(hess) = hess {
+            hess.fill(0.0);
+            let tangent: Tangent = shear.tangent.expect("tangent requested")
+                + volumetric_tangent(&gt, j, q * dc, q * d2c);
+            let tangent = if mode == HessianMode::Projected {
+                project_to_psd(&tangent)
+            } else {
+                tangent
+            };
+            add_tet_hessian(volume, g, &tangent, hess, 16);
+            for b in 0..4 {
+                let coupling = dvol_stress * g[b] * (0.25 * volume);
+                for i in 0..3 {
+                    for a in 0..4 {
+                        hess[(3 * b + i) * 16 + 12 + a] = coupling[i];
+                        hess[(12 + a) * 16 + 3 * b + i] = coupling[i];
+                    }
+                }
+            }
+            for a in 0..4 {
+                for b in 0..4 {
+                    hess[(12 + a) * 16 + 12 + b] = -self.compliance(e, a, b, mass);
+                }
+            }
+        }
+        energy
+    }
+}
+
+impl Term for ElasticTerm {
+    fn stencil_size(&self) -> usize {
+        match self.formulation {
+            Formulation::Standard => 12,
+            Formulation::Mixed { .. } => 16,
+        }
+    }
+
+    fn n_elements(&self) -> usize {
+        self.mesh.n_tets()
+    }
+
+    fn element_dofs(&self, e: usize, dofs: &mut [usize]) {
+        let tet = self.mesh.tets()[e];
+        for (a, &node) in tet.iter().enumerate() {
+            for k in 0..3 {
+                dofs[3 * a + k] = 3 * node + k;
+            }
+        }
+        if let Formulation::Mixed {
+            pressure_offset, ..
+        } = self.formulation
+        {
+            for (a, &node) in tet.iter().enumerate() {
+                dofs[12 + a] = pressure_offset + node;
+            }
+        }
+    }
+
+    fn element(
+        &self,
+        e: usize,
+        z: &[f64],
+        grad: Option<&mut [f64]>,
+        hess: Option<&mut [f64]>,
+        mode: HessianMode,
+    ) -> f64 {
+        match self.formulation {
+            Formulation::Standard => self.standard_element(e, z, grad, hess, mode),
+            Formulation::Mixed { mass, .. } => self.mixed_element(e, z, grad, hess, mode, mass),
+        }
+    }
+}
+
+/// The pressure compliance `1/2 p^T C p` with `C = sum_e M_e / lambda_e`, on the nodal pressure
+/// DOFs alone (indices 0..n_nodes). Its Hessian is `C`, assembled once per material.
+pub struct PressureCompliance<'a> {
+    pub elastic: &'a ElasticTerm,
+    pub mass: PressureMass,
+}
+
+impl Term for PressureCompliance<'_> {
+    fn stencil_size(&self) -> usize {
+        4
+    }
+    fn n_elements(&self) -> usize {
+        self.elastic.mesh.n_tets()
+    }
+    fn element_dofs(&self, e: usize, dofs: &mut [usize]) {
+        dofs.copy_from_slice(&self.elastic.mesh.tets()[e]);
+    }
+    fn element(
+        &self,
+        e: usize,
+        p: &[f64],
+        grad: Option<&mut [f64]>,
+        hess: Option<&mut [f64]>,
+        _: HessianMode,
+    ) -> f64 {
+        let mut cp = [0.0; 4];
+        for a in 0..4 {
+            for b in 0..4 {
+                cp[a] += self.elastic.compliance(e, a, b, self.mass) * p[b];
+            }
+        }
+        if let Some(grad) = grad {
+            grad.copy_from_slice(&cp);
+        }
+        if let Some(hess) = hess {
+            for a in 0..4 {
+                for b in 0..4 {
+                    hess[4 * a + b] = self.elastic.compliance(e, a, b, self.mass);
+                }
+            }
+        }
+        0.5 * (0..4).map(|a| p[a] * cp[a]).sum::<f64>()
+    }
+}

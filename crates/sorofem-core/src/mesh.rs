@@ -1,0 +1,336 @@
+//! Tetrahedral meshes: validated rest geometry, per-element shape gradients, boundary and queries.
+
+use crate::error::{check_finite, Error, Result};
+use nalgebra::{Matrix3, Vector3};
+use std::collections::HashMap;
+
+/// What to do with a tetrahedron whose nodes are ordered with negative orientation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Orientation {
+    /// Swap its last two nodes so that its volume is positive, and report its index.
+    Reorient,
+    /// Reject the mesh with [`Error::InvertedTet`].
+    Reject,
+}
+
+/// A linear tetrahedral mesh in its rest configuration.
+///
+/// Invariants (established by [`TetMesh::try_new`]): every tetrahedron has positive volume, every
+/// index is in range, every coordinate is finite.
+#[derive(Clone, Debug)]
+pub struct TetMesh {
+    rest: Vec<[f64; 3]>,
+    tets: Vec<[usize; 4]>,
+    volumes: Vec<f64>,
+    /// Gradients of the four linear shape functions of each tet, in 1/m: F = sum_a x_a (x) g_a.
+    shape_gradients: Vec<[Vector3<f64>; 4]>,
+}
+
+/// Tets thinner than this fraction of (longest edge)^3 count as degenerate; a regular tet has 0.118.
+const DEGENERACY_RATIO: f64 = 1e-12;
+
+fn signed_volume(p: &[[f64; 3]], t: &[usize; 4]) -> f64 {
+    let d = |a: usize| Vector3::from(p[t[a]]) - Vector3::from(p[t[0]]);
+    Matrix3::from_columns(&[d(1), d(2), d(3)]).determinant() / 6.0
+}
+
+fn longest_edge(p: &[[f64; 3]], t: &[usize; 4]) -> f64 {
+    let mut longest: f64 = 0.0;
+    for a in 0..4 {
+        for b in a + 1..4 {
+            longest = longest.max((Vector3::from(p[t[a]]) - Vector3::from(p[t[b]])).norm());
+        }
+    }
+    longest
+}
+
+impl TetMesh {
+    /// Validates and builds a mesh from node coordinates (m) and 0-based tetrahedra.
+    ///
+    /// Returns the mesh and the indices of the tets that were reoriented (empty with
+    /// [`Orientation::Reject`]).
+    pub fn try_new(
+        rest: Vec<[f64; 3]>,
+        tets_in: &[[i64; 4]],
+        orientation: Orientation,
+    ) -> Result<(Self, Vec<usize>)> {
+        if rest.is_empty() {
+            return Err(Error::shape("points", "at least 4 nodes (n, 3)", "0 nodes"));
+        }
+        if tets_in.is_empty() {
+            return Err(Error::shape(
+                "tets",
+                "at least one tetrahedron (m, 4)",
+                "0 tetrahedra",
+            ));
+        }
+        check_finite("points", rest.as_flattened())?;
+        let n = rest.len();
+        let mut tets = Vec::with_capacity(tets_in.len());
+        for (e, t) in tets_in.iter().enumerate() {
+            let mut tet = [0usize; 4];
+            for a in 0..4 {
+                if t[a] < 0 || t[a] as usize >= n {
+                    return Err(Error::IndexOutOfRange {
+                        param: "tets".into(),
+                        position: 4 * e + a,
+                        index: t[a],
+                        len: n,
+                    });
+                }
+                tet[a] = t[a] as usize;
+            }
+            for a in 0..4 {
+                for b in a + 1..4 {
+                    if tet[a] == tet[b] {
+                        return Err(Error::DegenerateTet {
+                            tet: e,
+                            volume: 0.0,
+                            threshold: 0.0,
+                        });
+                    }
+                }
+            }
+            tets.push(tet);
+        }
+        let mut reoriented = Vec::new();
+        let mut volumes = Vec::with_capacity(tets.len());
+        for (e, tet) in tets.iter_mut().enumerate() {
+            let mut volume = signed_volume(&rest, tet);
+            let threshold = DEGENERACY_RATIO * longest_edge(&rest, tet).powi(3);
+            if volume.abs() <= threshold {
+                return Err(Error::DegenerateTet {
+                    tet: e,
+                    volume,
+                    threshold,
+                });
+            }
+            if volume < 0.0 {
+                match orientation {
+                    Orientation::Reject => return Err(Error::InvertedTet { tet: e, volume }),
+                    Orientation::Reorient => {
+                        tet.swap(2, 3);
+                        volume = -volume;
+                        reoriented.push(e);
+                    }
+                }
+            }
+            volumes.push(volume);
+        }
+        let shape_gradients = tets
+            .iter()
+            .map(|t| {
+                let d = |a: usize| Vector3::from(rest[t[a]]) - Vector3::from(rest[t[0]]);
+                let dm = Matrix3::from_columns(&[d(1), d(2), d(3)]);
+                // Non-degeneracy was checked above, so the inverse exists.
+                let dm_inv = dm.try_inverse().expect("non-degenerate tetrahedron");
+                let g1 = dm_inv.row(0).transpose();
+                let g2 = dm_inv.row(1).transpose();
+                let g3 = dm_inv.row(2).transpose();
+                [-(g1 + g2 + g3), g1, g2, g3]
+            })
+            .collect();
+        Ok((
+            TetMesh {
+                rest,
+                tets,
+                volumes,
+                shape_gradients,
+            },
+            reoriented,
+        ))
+    }
+
+    /// A box `[origin, origin + size]` of `cells[0] x cells[1] x cells[2]` hexahedra, each split into
+    /// six tetrahedra around its main diagonal (Kuhn subdivision: conforming across faces).
+    ///
+    /// Node `(i, j, k)` has index `i + (nx + 1) (j + (ny + 1) k)`. The 8x2x2 box has 81 nodes and 192 tets.
+    pub fn box_mesh(size: [f64; 3], cells: [usize; 3], origin: [f64; 3]) -> Result<Self> {
+        for a in 0..3 {
+            if !(size[a] > 0.0 && size[a].is_finite()) {
+                return Err(Error::invalid(
+                    "size",
+                    "three positive lengths (m)",
+                    format!("{size:?}"),
+                ));
+            }
+            if cells[a] == 0 {
+                return Err(Error::invalid(
+                    "cells",
+                    "three positive cell counts",
+                    format!("{cells:?}"),
+                ));
+            }
+        }
+        check_finite("origin", &origin)?;
+        let [nx, ny, nz] = cells;
+        let node = |i: usize, j: usize, k: usize| (i + (nx + 1) * (j + (ny + 1) * k)) as i64;
+        let mut points = Vec::with_capacity((nx + 1) * (ny + 1) * (nz + 1));
+        for k in 0..=nz {
+            for j in 0..=ny {
+                for i in 0..=nx {
+                    points.push([
+                        origin[0] + size[0] * i as f64 / nx as f64,
+                        origin[1] + size[1] * j as f64 / ny as f64,
+                        origin[2] + size[2] * k as f64 / nz as f64,
+                    ]);
+                }
+            }
+        }
+        const PERMUTATIONS: [[usize; 3]; 6] = [
+            [0, 1, 2],
+            [0, 2, 1],
+            [1, 0, 2],
+            [1, 2, 0],
+            [2, 0, 1],
+            [2, 1, 0],
+        ];
+        let mut tets = Vec::with_capacity(6 * nx * ny * nz);
+        for k in 0..nz {
+            for j in 0..ny {
+                for i in 0..nx {
+                    for perm in PERMUTATIONS {
+                        let mut corner = [i, j, k];
+                        let mut tet = [node(i, j, k); 4];
+                        for (step, &axis) in perm.iter().enumerate() {
+                            corner[axis] += 1;
+                            tet[step + 1] = node(corner[0], corner[1], corner[2]);
+                        }
+                        tets.push(tet);
+                    }
+                }
+            }
+        }
+        // Odd permutations come out negatively oriented; reorienting them is expected here.
+        Ok(TetMesh::try_new(points, &tets, Orientation::Reorient)?.0)
+    }
+
+    pub fn n_nodes(&self) -> usize {
+        self.rest.len()
+    }
+
+    pub fn n_tets(&self) -> usize {
+        self.tets.len()
+    }
+
+    /// Rest coordinates (m), one `[x, y, z]` per node.
+    pub fn rest(&self) -> &[[f64; 3]] {
+        &self.rest
+    }
+
+    pub fn tets(&self) -> &[[usize; 4]] {
+        &self.tets
+    }
+
+    /// Rest volumes (m^3), one per tet, all positive.
+    pub fn volumes(&self) -> &[f64] {
+        &self.volumes
+    }
+
+    /// Shape-function gradients (1/m) of tet `e`: `F = sum_a x_a g_a^T`.
+    pub fn shape_gradients(&self, e: usize) -> &[Vector3<f64>; 4] {
+        &self.shape_gradients[e]
+    }
+
+    /// Deformation gradient `F = I + sum_a u_a g_a^T` of tet `e` for nodal displacements `u`
+    /// (m, 3 n values, node-major).
+    pub fn deformation_gradient(&self, e: usize, u: &[f64]) -> Matrix3<f64> {
+        let mut f = Matrix3::identity();
+        for (a, &node) in self.tets[e].iter().enumerate() {
+            let ua = Vector3::new(u[3 * node], u[3 * node + 1], u[3 * node + 2]);
+            f += ua * self.shape_gradients[e][a].transpose();
+        }
+        f
+    }
+
+    /// Boundary triangles (faces belonging to exactly one tet), oriented with outward normals.
+    pub fn boundary_faces(&self) -> Vec<[usize; 3]> {
+        // Outward faces of a positively oriented tet (0, 1, 2, 3).
+        const FACES: [[usize; 3]; 4] = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]];
+        let mut count: HashMap<[usize; 3], (usize, [usize; 3])> = HashMap::new();
+        for tet in &self.tets {
+            for face in FACES {
+                let oriented = [tet[face[0]], tet[face[1]], tet[face[2]]];
+                let mut key = oriented;
+                key.sort_unstable();
+                count
+                    .entry(key)
+                    .and_modify(|c| c.0 += 1)
+                    .or_insert((1, oriented));
+            }
+        }
+        let mut faces: Vec<[usize; 3]> = count
+            .into_values()
+            .filter(|(c, _)| *c == 1)
+            .map(|(_, f)| f)
+            .collect();
+        faces.sort_unstable();
+        faces
+    }
+
+    /// Nodes with `min <= x <= max` componentwise, in increasing order.
+    pub fn nodes_in_box(&self, min: [f64; 3], max: [f64; 3]) -> Vec<usize> {
+        self.nodes_where(|p| (0..3).all(|a| p[a] >= min[a] && p[a] <= max[a]))
+    }
+
+    /// Nodes within `tolerance` (m) of the plane through `point` with normal `normal`.
+    pub fn nodes_on_plane(
+        &self,
+        point: [f64; 3],
+        normal: [f64; 3],
+        tolerance: f64,
+    ) -> Result<Vec<usize>> {
+        let n = Vector3::from(normal);
+        let len = n.norm();
+        if !(len > 0.0 && len.is_finite()) {
+            return Err(Error::invalid(
+                "normal",
+                "a non-zero finite vector",
+                format!("{normal:?}"),
+            ));
+        }
+        let n = n / len;
+        let p0 = Vector3::from(point);
+        Ok(self.nodes_where(|p| (Vector3::from(*p) - p0).dot(&n).abs() <= tolerance))
+    }
+
+    pub fn nodes_where(&self, predicate: impl Fn(&[f64; 3]) -> bool) -> Vec<usize> {
+        (0..self.n_nodes())
+            .filter(|&i| predicate(&self.rest[i]))
+            .collect()
+    }
+
+    /// Rest positions as one flat node-major vector of length `3 n`.
+    pub fn rest_flat(&self) -> Vec<f64> {
+        self.rest.as_flattened().to_vec()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn box_has_paper_counts_and_closed_boundary() {
+        let mesh = TetMesh::box_mesh([0.4, 0.1, 0.1], [8, 2, 2], [0.0; 3]).unwrap();
+        assert_eq!(mesh.n_nodes(), 81);
+        assert_eq!(mesh.n_tets(), 192);
+        let volume: f64 = mesh.volumes().iter().sum();
+        assert!((volume - 0.004).abs() < 1e-15);
+        // A closed surface: by the divergence theorem sum of outward area vectors vanishes and
+        // (1/3) sum x . n A equals the volume.
+        let faces = mesh.boundary_faces();
+        let p = |i: usize| Vector3::from(mesh.rest()[i]);
+        let mut area_sum = Vector3::zeros();
+        let mut enclosed = 0.0;
+        for f in &faces {
+            let n = (p(f[1]) - p(f[0])).cross(&(p(f[2]) - p(f[0]))) / 2.0;
+            area_sum += n;
+            enclosed += p(f[0]).dot(&n) / 3.0;
+        }
+        assert!(area_sum.norm() < 1e-14);
+        assert!((enclosed - 0.004).abs() < 1e-14);
+        // Surface of an 8x2x2 grid: 2*(8*2 + 8*2 + 2*2) quads, 2 triangles each.
+        assert_eq!(faces.len(), 2 * 2 * (16 + 16 + 4));
+    }
+}

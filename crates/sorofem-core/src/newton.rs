@@ -1,0 +1,237 @@
+//! Newton's method with a backtracking line search and load stepping with automatic cut-back.
+//!
+//! The solver minimises a merit energy over the free DOFs. Each iteration factors the exact
+//! Hessian first (quadratic convergence); only when that is not positive definite (or, for
+//! saddle-point systems, gives no descent direction) does it fall back to element-wise projected
+//! Hessians. The line search never accepts a state with an inverted element (infinite energy).
+
+use crate::error::{Error, Result};
+use std::time::Instant;
+
+/// Seconds spent per phase of a solve.
+#[derive(Clone, Debug, Default)]
+pub struct Timings {
+    pub assembly: f64,
+    pub factorization: f64,
+    pub solve: f64,
+    pub line_search: f64,
+    pub total: f64,
+}
+
+/// What happened during a solve: enough to judge convergence and where the time went.
+#[derive(Clone, Debug, Default)]
+pub struct SolveReport {
+    pub converged: bool,
+    /// Newton iterations over all load steps (including those of failed, cut-back steps).
+    pub iterations: usize,
+    /// `||g|| / reference` at every iterate, over all load steps (the first entry of each step
+    /// is its starting point).
+    pub residual_history: Vec<f64>,
+    /// Merit energy (J) at the same iterates.
+    pub energy_history: Vec<f64>,
+    /// Accepted load steps.
+    pub load_steps: usize,
+    /// Times a load step failed and was halved.
+    pub cutbacks: usize,
+    /// Iterations that used the projected (PSD) Hessian.
+    pub projected_steps: usize,
+    /// Final `||g||` in the units of the gradient (N) and the reference it was divided by.
+    pub residual_norm: f64,
+    pub reference_norm: f64,
+    pub timings: Timings,
+    pub message: String,
+}
+
+/// Newton settings.
+#[derive(Clone, Debug)]
+pub struct NewtonOptions {
+    /// Stop when `||g|| <= tolerance * reference` (relative residual).
+    pub tolerance: f64,
+    /// Per load step.
+    pub max_iterations: usize,
+    /// Initial number of equal load increments.
+    pub load_steps: usize,
+    /// How many times in total an increment may be halved after a failure.
+    pub max_cutbacks: usize,
+}
+
+impl Default for NewtonOptions {
+    fn default() -> Self {
+        NewtonOptions {
+            tolerance: 1e-8,
+            max_iterations: 50,
+            load_steps: 1,
+            max_cutbacks: 8,
+        }
+    }
+}
+
+/// A minimisation problem in the free DOFs, at a given load factor.
+pub trait NewtonProblem {
+    fn n_free(&self) -> usize;
+    /// Sets the load factor (0: unloaded, 1: full loads) and applies it to the fixed DOFs of `z`.
+    fn set_load_factor(&mut self, factor: f64, z: &mut [f64]);
+    /// Norm of the external load on the free DOFs at the current factor (N): the residual scale.
+    fn load_norm(&self) -> f64;
+    /// Brings the DOFs that are eliminated rather than solved for (e.g. pressures) up to date
+    /// and returns the merit energy (J); `+inf` when the state is inadmissible.
+    fn merit(&mut self, z: &mut [f64]) -> f64;
+    /// Gradient of the merit energy with respect to the free DOFs.
+    fn gradient(&mut self, z: &[f64]) -> Vec<f64>;
+    /// Newton direction in the free DOFs: solves `H d = -g` with the exact (`projected = false`)
+    /// or the projected Hessian. `Ok(None)` when that Hessian gives no descent direction.
+    fn direction(
+        &mut self,
+        z: &[f64],
+        g: &[f64],
+        projected: bool,
+        timings: &mut Timings,
+    ) -> Result<Option<Vec<f64>>>;
+    /// Adds `t d` (free DOFs) to `z`.
+    fn step(&self, z: &mut [f64], d: &[f64], t: f64);
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// Solves from `z` (full DOFs) to the equilibrium at load factor 1; `z` holds the result.
+pub fn solve(
+    problem: &mut dyn NewtonProblem,
+    z: &mut Vec<f64>,
+    options: &NewtonOptions,
+) -> Result<SolveReport> {
+    let start = Instant::now();
+    let mut report = SolveReport::default();
+    if !(options.tolerance > 0.0) || options.max_iterations == 0 || options.load_steps == 0 {
+        return Err(Error::invalid(
+            "options",
+            "tolerance > 0, max_iterations >= 1 and load_steps >= 1",
+            format!(
+                "tolerance {}, max_iterations {}, load_steps {}",
+                options.tolerance, options.max_iterations, options.load_steps
+            ),
+        ));
+    }
+    let mut reached = 0.0;
+    let mut increment = 1.0 / options.load_steps as f64;
+    while reached < 1.0 {
+        let target = (reached + increment).min(1.0);
+        let saved = z.clone();
+        problem.set_load_factor(target, z);
+        match newton_step(problem, z, options, &mut report)? {
+            true => {
+                reached = target;
+                report.load_steps += 1;
+            }
+            false => {
+                *z = saved;
+                if report.cutbacks >= options.max_cutbacks {
+                    report.timings.total = start.elapsed().as_secs_f64();
+                    let message = format!(
+                        "Newton did not converge at load factor {target:.4} after {} cut-backs; last relative residuals: {:?}",
+                        report.cutbacks,
+                        report.residual_history.iter().rev().take(5).rev().map(|r| format!("{r:.3e}")).collect::<Vec<_>>()
+                    );
+                    report.message = message.clone();
+                    return Err(Error::NotConverged {
+                        message,
+                        report: Box::new(report),
+                    });
+                }
+                report.cutbacks += 1;
+                increment /= 2.0;
+                problem.set_load_factor(reached, z);
+            }
+        }
+    }
+    report.converged = true;
+    report.timings.total = start.elapsed().as_secs_f64();
+    report.message = format!("converged in {} Newton iterations", report.iterations);
+    Ok(report)
+}
+
+/// Newton iterations at a fixed load factor. `Ok(false)` when they fail to converge.
+fn newton_step(
+    problem: &mut dyn NewtonProblem,
+    z: &mut [f64],
+    options: &NewtonOptions,
+    report: &mut SolveReport,
+) -> Result<bool> {
+    let mut t0 = Instant::now();
+    let mut energy = problem.merit(z);
+    if !energy.is_finite() {
+        return Ok(false);
+    }
+    let mut g = problem.gradient(z);
+    report.timings.assembly += t0.elapsed().as_secs_f64();
+    let reference = problem.load_norm().max(norm(&g));
+    report.reference_norm = reference;
+    let mut g_norm = norm(&g);
+    report.residual_norm = g_norm;
+    report.residual_history.push(if reference > 0.0 {
+        g_norm / reference
+    } else {
+        0.0
+    });
+    report.energy_history.push(energy);
+    for _ in 0..options.max_iterations {
+        if g_norm <= options.tolerance * reference || reference == 0.0 {
+            return Ok(true);
+        }
+        report.iterations += 1;
+        let mut direction = problem.direction(z, &g, false, &mut report.timings)?;
+        if direction.is_none() {
+            report.projected_steps += 1;
+            direction = problem.direction(z, &g, true, &mut report.timings)?;
+        }
+        let Some(d) = direction else {
+            return Err(Error::LinearSolver {
+                message:
+                    "the projected Hessian is singular: is the body fixed against rigid motions?"
+                        .into(),
+            });
+        };
+        t0 = Instant::now();
+        let slope = dot(&g, &d);
+        let mut t = 1.0;
+        let mut accepted = false;
+        let mut trial = z.to_vec();
+        for _ in 0..40 {
+            trial.copy_from_slice(z);
+            problem.step(&mut trial, &d, t);
+            let e_trial = problem.merit(&mut trial);
+            if e_trial.is_finite() {
+                if e_trial <= energy + 1e-4 * t * slope {
+                    accepted = true;
+                } else if (e_trial - energy).abs() <= 1e-11 * energy.abs().max(f64::MIN_POSITIVE) {
+                    // The energy change is below its round-off: judge by the residual instead.
+                    let g_trial = problem.gradient(&trial);
+                    accepted = norm(&g_trial) < g_norm;
+                }
+                if accepted {
+                    energy = e_trial;
+                    break;
+                }
+            }
+            t *= 0.5;
+        }
+        report.timings.line_search += t0.elapsed().as_secs_f64();
+        if !accepted {
+            return Ok(false);
+        }
+        z.copy_from_slice(&trial);
+        t0 = Instant::now();
+        g = problem.gradient(z);
+        report.timings.assembly += t0.elapsed().as_secs_f64();
+        g_norm = norm(&g);
+        report.residual_norm = g_norm;
+        report.residual_history.push(g_norm / reference);
+        report.energy_history.push(energy);
+    }
+    Ok(g_norm <= options.tolerance * reference)
+}

@@ -1,0 +1,158 @@
+//! Shared test support: the one central-difference checker every derivative test goes through,
+//! a reproducible random generator, and small model builders.
+#![allow(dead_code)]
+
+/// Deterministic pseudo-random numbers in [-1, 1) (xorshift), so failures are reproducible.
+pub struct Rng(u64);
+
+impl Rng {
+    pub fn new(seed: u64) -> Self {
+        Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
+    }
+    pub fn next(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    }
+    pub fn vec(&mut self, n: usize, scale: f64) -> Vec<f64> {
+        (0..n).map(|_| scale * self.next()).collect()
+    }
+}
+
+/// Checks an analytic Jacobian `jac` (m x n, row-major) of `f: R^n -> R^m` at `x0` against central
+/// differences with step `h` (relative to max(1, |x_i|)). Fails with the worst entry when
+/// `|fd - analytic| > rtol * max|analytic| + atol`.
+pub fn check_jacobian(
+    name: &str,
+    x0: &[f64],
+    h: f64,
+    f: impl Fn(&[f64]) -> Vec<f64>,
+    jac: &[f64],
+    rtol: f64,
+    atol: f64,
+) {
+    let n = x0.len();
+    let m = f(x0).len();
+    assert_eq!(
+        jac.len(),
+        m * n,
+        "{name}: analytic Jacobian has the wrong size"
+    );
+    let scale = jac.iter().fold(0.0f64, |s, v| s.max(v.abs()));
+    let mut worst = (0.0, 0, 0, 0.0, 0.0);
+    let mut x = x0.to_vec();
+    for j in 0..n {
+        let step = h * x0[j].abs().max(1.0);
+        x[j] = x0[j] + step;
+        let fp = f(&x);
+        x[j] = x0[j] - step;
+        let fm = f(&x);
+        x[j] = x0[j];
+        for i in 0..m {
+            let fd = (fp[i] - fm[i]) / (2.0 * step);
+            let err = (fd - jac[i * n + j]).abs();
+            if err > worst.0 {
+                worst = (err, i, j, fd, jac[i * n + j]);
+            }
+        }
+    }
+    let (err, i, j, fd, an) = worst;
+    assert!(
+        err <= rtol * scale + atol,
+        "{name}: entry ({i}, {j}) finite difference {fd:.10e} vs analytic {an:.10e} (error {err:.3e}, scale {scale:.3e})"
+    );
+}
+
+/// Gradient check of a scalar function through [`check_jacobian`].
+pub fn check_gradient(
+    name: &str,
+    x0: &[f64],
+    h: f64,
+    f: impl Fn(&[f64]) -> f64,
+    grad: &[f64],
+    rtol: f64,
+    atol: f64,
+) {
+    check_jacobian(name, x0, h, |x| vec![f(x)], grad, rtol, atol);
+}
+
+/// Directional check: `d/de f(x0 + e v)` at e = 0 by central differences against `analytic`.
+pub fn check_directional(
+    name: &str,
+    x0: &[f64],
+    v: &[f64],
+    h: f64,
+    f: impl Fn(&[f64]) -> f64,
+    analytic: f64,
+    rtol: f64,
+) {
+    let at = |e: f64| -> f64 {
+        let x: Vec<f64> = x0.iter().zip(v).map(|(a, b)| a + e * b).collect();
+        f(&x)
+    };
+    let fd = (at(h) - at(-h)) / (2.0 * h);
+    assert!(
+        (fd - analytic).abs() <= rtol * analytic.abs().max(fd.abs()),
+        "{name}: directional derivative finite difference {fd:.10e} vs analytic {analytic:.10e}"
+    );
+}
+
+use sorofem_core::material::neo_hookean::lame_from_young;
+use sorofem_core::{Formulation, Loads, Material, Model, Solution, SolveOptions, TetMesh};
+use std::sync::Arc;
+
+/// A box cantilever clamped at x = 0 with a uniform material.
+pub fn cantilever(
+    size: [f64; 3],
+    cells: [usize; 3],
+    youngs: f64,
+    nu: f64,
+    density: f64,
+    formulation: Formulation,
+) -> Model {
+    let mesh = Arc::new(TetMesh::box_mesh(size, cells, [0.0; 3]).unwrap());
+    let fixed: Vec<i64> = mesh
+        .nodes_in_box([-1e-9, -1.0, -1.0], [1e-9, 1.0, 1.0])
+        .iter()
+        .map(|&i| i as i64)
+        .collect();
+    let m = mesh.n_tets();
+    let mut model = Model::try_new(
+        mesh,
+        &fixed,
+        formulation,
+        sorofem_core::material::Volumetric::Log,
+    )
+    .unwrap();
+    let (mu, lambda) = lame_from_young(youngs, nu);
+    model
+        .set_material(&Material {
+            mu: vec![mu; m],
+            lambda: vec![lambda; m],
+            density: vec![density; m],
+        })
+        .unwrap();
+    model
+}
+
+pub fn solve_gravity(model: &mut Model, gravity: [f64; 3]) -> Solution {
+    let loads = Loads {
+        gravity,
+        ..Default::default()
+    };
+    model.solve(&loads, None, &SolveOptions::default()).unwrap()
+}
+
+/// Mean displacement of the nodes on the free end face x = L (m, per axis).
+pub fn tip_displacement(model: &Model, solution: &Solution, length: f64) -> [f64; 3] {
+    let mesh = model.mesh();
+    let tip = mesh.nodes_in_box([length - 1e-9, -1.0, -1.0], [length + 1e-9, 1.0, 1.0]);
+    let mut u = [0.0; 3];
+    for &i in &tip {
+        for k in 0..3 {
+            u[k] += (solution.positions[3 * i + k] - mesh.rest()[i][k]) / tip.len() as f64;
+        }
+    }
+    u
+}

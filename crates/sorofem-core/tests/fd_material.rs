@@ -1,0 +1,149 @@
+//! Finite-difference checks of the Neo-Hookean density, stress and tangent.
+mod common;
+
+use common::{check_gradient, check_jacobian, Rng};
+use sorofem_core::material::{project_to_psd, Mat3, NeoHookean, Volumetric};
+
+fn random_f(rng: &mut Rng, amplitude: f64) -> Mat3 {
+    Mat3::identity() + Mat3::from_iterator(rng.vec(9, amplitude))
+}
+
+fn flat(m: &Mat3) -> Vec<f64> {
+    // Row-major: entry (i, j) at 3 i + j, the convention of the tangent.
+    (0..9).map(|k| m[(k / 3, k % 3)]).collect()
+}
+
+fn unflat(v: &[f64]) -> Mat3 {
+    Mat3::from_fn(|i, j| v[3 * i + j])
+}
+
+#[test]
+fn stress_and_tangent_match_finite_differences() {
+    let mut rng = Rng::new(7);
+    for volumetric in [Volumetric::Log, Volumetric::Linear] {
+        for trial in 0..20 {
+            let material = NeoHookean {
+                mu: 2.3e4,
+                lambda: 4.1e5,
+                volumetric,
+            };
+            let f = random_f(&mut rng, if trial < 10 { 0.2 } else { 0.5 });
+            if f.determinant() < 0.2 {
+                continue;
+            }
+            let r = material.response(&f, true).unwrap();
+            check_gradient(
+                "dpsi/dF",
+                &flat(&f),
+                1e-6,
+                |x| material.energy_density(&unflat(x)),
+                &flat(&r.stress),
+                1e-7,
+                0.0,
+            );
+            let tangent: Vec<f64> = (0..81)
+                .map(|k| r.tangent.unwrap()[(k / 9, k % 9)])
+                .collect();
+            check_jacobian(
+                "dP/dF",
+                &flat(&f),
+                1e-6,
+                |x| flat(&material.response(&unflat(x), false).unwrap().stress),
+                &tangent,
+                1e-7,
+                0.0,
+            );
+        }
+    }
+}
+
+#[test]
+fn shear_part_and_parameter_derivatives_match_finite_differences() {
+    let mut rng = Rng::new(11);
+    for volumetric in [Volumetric::Log, Volumetric::Linear] {
+        let f = random_f(&mut rng, 0.3);
+        let params = [3.0e4, 2.0e5];
+        let density = |p: &[f64]| {
+            NeoHookean {
+                mu: p[0],
+                lambda: p[1],
+                volumetric,
+            }
+            .energy_density(&f)
+        };
+        let material = NeoHookean {
+            mu: params[0],
+            lambda: params[1],
+            volumetric,
+        };
+        check_gradient(
+            "dpsi/d(mu, lambda)",
+            &params,
+            1e-6,
+            density,
+            &material.energy_param_gradient(&f).unwrap(),
+            1e-7,
+            0.0,
+        );
+        let [dp_dmu, dp_dlambda] = material.stress_param_gradient(&f).unwrap();
+        let mut jac = vec![0.0; 18];
+        for k in 0..9 {
+            jac[2 * k] = flat(&dp_dmu)[k];
+            jac[2 * k + 1] = flat(&dp_dlambda)[k];
+        }
+        check_jacobian(
+            "dP/d(mu, lambda)",
+            &params,
+            1e-6,
+            |p| {
+                flat(
+                    &NeoHookean {
+                        mu: p[0],
+                        lambda: p[1],
+                        volumetric,
+                    }
+                    .response(&f, false)
+                    .unwrap()
+                    .stress,
+                )
+            },
+            &jac,
+            1e-7,
+            0.0,
+        );
+    }
+}
+
+#[test]
+fn rest_state_is_stress_free_and_projection_is_psd() {
+    let material = NeoHookean {
+        mu: 1e4,
+        lambda: 1e5,
+        volumetric: Volumetric::Log,
+    };
+    let r = material.response(&Mat3::identity(), true).unwrap();
+    assert!(r.energy.abs() < 1e-12 && r.stress.norm() < 1e-9);
+    // Strong compression makes the tangent indefinite; the projection must fix it and nothing else.
+    let f = Mat3::from_diagonal(&nalgebra::Vector3::new(0.3, 1.4, 1.2));
+    let t = material.response(&f, true).unwrap().tangent.unwrap();
+    let projected = project_to_psd(&t);
+    let min_eig = nalgebra::SymmetricEigen::new(projected).eigenvalues.min();
+    assert!(min_eig > -1e-9 * t.norm(), "{min_eig}");
+    let pd = material
+        .response(&Mat3::identity(), true)
+        .unwrap()
+        .tangent
+        .unwrap();
+    assert!((project_to_psd(&pd) - pd).norm() < 1e-9 * pd.norm());
+}
+
+#[test]
+fn inverted_deformation_has_infinite_energy() {
+    let material = NeoHookean {
+        mu: 1e4,
+        lambda: 1e5,
+        volumetric: Volumetric::Log,
+    };
+    let f = Mat3::from_diagonal(&nalgebra::Vector3::new(-1.0, 1.0, 1.0));
+    assert_eq!(material.energy_density(&f), f64::INFINITY);
+}

@@ -1,0 +1,217 @@
+//! Static equilibria against exact and analytic answers: the patch test, Euler-Bernoulli, and
+//! Newton's convergence on the paper's cantilevers.
+mod common;
+
+use common::{cantilever, solve_gravity, tip_displacement};
+use sorofem_core::material::neo_hookean::lame_from_young;
+use sorofem_core::{Formulation, Loads, Material, Model, PressureMass, SolveOptions, TetMesh};
+use std::sync::Arc;
+
+#[test]
+fn patch_test_affine_boundary_motion_gives_homogeneous_solution() {
+    for formulation in [
+        Formulation::Standard,
+        Formulation::Mixed {
+            mass: PressureMass::Consistent,
+        },
+    ] {
+        let mesh = Arc::new(TetMesh::box_mesh([1.0, 0.5, 0.5], [4, 3, 3], [0.0; 3]).unwrap());
+        let boundary: Vec<usize> = mesh.nodes_where(|p| {
+            p[0].abs() < 1e-9
+                || (p[0] - 1.0).abs() < 1e-9
+                || p[1].abs() < 1e-9
+                || (p[1] - 0.5).abs() < 1e-9
+                || p[2].abs() < 1e-9
+                || (p[2] - 0.5).abs() < 1e-9
+        });
+        let affine = |p: &[f64; 3]| {
+            [
+                0.2 * p[0] + 0.05 * p[1],
+                -0.04 * p[1] + 0.03 * p[2],
+                0.1 * p[0] - 0.06 * p[2],
+            ]
+        };
+        let prescribed: Vec<[f64; 3]> = boundary.iter().map(|&i| affine(&mesh.rest()[i])).collect();
+        let fixed: Vec<i64> = boundary.iter().map(|&i| i as i64).collect();
+        let m = mesh.n_tets();
+        let mut model = Model::try_new(
+            mesh.clone(),
+            &fixed,
+            formulation,
+            sorofem_core::material::Volumetric::Log,
+        )
+        .unwrap();
+        let (mu, lambda) = lame_from_young(1e5, 0.45);
+        model
+            .set_material(&Material {
+                mu: vec![mu; m],
+                lambda: vec![lambda; m],
+                density: vec![0.0; m],
+            })
+            .unwrap();
+        let loads = Loads {
+            prescribed,
+            ..Default::default()
+        };
+        let solution = model
+            .solve(
+                &loads,
+                None,
+                &SolveOptions {
+                    load_steps: 2,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+        for i in 0..mesh.n_nodes() {
+            let u = affine(&mesh.rest()[i]);
+            for k in 0..3 {
+                let err = (solution.positions[3 * i + k] - mesh.rest()[i][k] - u[k]).abs();
+                assert!(
+                    err < 1e-10,
+                    "{formulation:?}: node {i} off the affine field by {err:e}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn slender_cantilever_matches_euler_bernoulli() {
+    // L/h = 20, nu = 0 and a tip deflection of 0.6% of L: the linear, nearly shear-free regime.
+    let (length, h, youngs, density, g): (f64, f64, f64, f64, f64) =
+        (1.0, 0.05, 1e6, 1000.0, 9.81e-3);
+    let q = density * g * h * h;
+    let w_eb = q * length.powi(4) / (8.0 * youngs * h * h.powi(3) / 12.0);
+    let ratios: Vec<f64> = [[80, 4, 4], [160, 8, 8]]
+        .iter()
+        .map(|&cells| {
+            let mut model = cantilever(
+                [length, h, h],
+                cells,
+                youngs,
+                0.0,
+                density,
+                Formulation::Standard,
+            );
+            let solution = solve_gravity(&mut model, [0.0, 0.0, -g]);
+            -tip_displacement(&model, &solution, length)[2] / w_eb
+        })
+        .collect();
+    // P1 tets are stiff in bending and converge from below at about second order in h.
+    let error_reduction = (1.0 - ratios[0]) / (1.0 - ratios[1]);
+    eprintln!("w / w_EB = {ratios:?}, error reduced {error_reduction:.2}x by halving h");
+    assert!(ratios[0] < ratios[1] && ratios[1] < 1.0);
+    assert!(
+        (ratios[1] - 1.0).abs() < 0.06,
+        "finest mesh: w / w_EB = {}",
+        ratios[1]
+    );
+    assert!(error_reduction > 3.0, "error reduction {error_reduction}");
+}
+
+#[test]
+fn paper_cantilevers_converge_quadratically_in_one_load_step() {
+    for (length, max_iterations) in [(0.4, 12), (1.0, 25)] {
+        let mut model = cantilever(
+            [length, 0.1, 0.1],
+            [8, 2, 2],
+            66e3,
+            0.45,
+            1080.0,
+            Formulation::Standard,
+        );
+        let solution = solve_gravity(&mut model, [0.0, 0.0, -9.81]);
+        let r = &solution.report;
+        eprintln!(
+            "L = {length}: {} iterations, {} projected, history {:?}",
+            r.iterations, r.projected_steps, r.residual_history
+        );
+        assert!(r.converged && r.cutbacks == 0 && r.load_steps == 1);
+        assert!(
+            r.iterations <= max_iterations,
+            "L = {length}: {} Newton iterations",
+            r.iterations
+        );
+        let h = &r.residual_history;
+        // Quadratic convergence: once below 1e-3 each step at least squares the residual (up to a constant).
+        let last = h.len() - 1;
+        assert!(h[last] <= 1e-8);
+        assert!(
+            h[last] < 10.0 * h[last - 1].powf(1.5) || h[last - 1] < 1e-6,
+            "{h:?}"
+        );
+    }
+}
+
+#[test]
+fn inverted_or_bad_inputs_are_rejected_with_named_parameters() {
+    let mesh = Arc::new(TetMesh::box_mesh([1.0, 0.1, 0.1], [2, 1, 1], [0.0; 3]).unwrap());
+    let err = Model::try_new(
+        mesh.clone(),
+        &[0, 999],
+        Formulation::Standard,
+        sorofem_core::material::Volumetric::Log,
+    )
+    .err()
+    .unwrap();
+    assert!(
+        err.to_string().contains("`fixed`") && err.to_string().contains("999"),
+        "{err}"
+    );
+    let mut model = Model::try_new(
+        mesh.clone(),
+        &[0, 1],
+        Formulation::Standard,
+        sorofem_core::material::Volumetric::Log,
+    )
+    .unwrap();
+    let m = mesh.n_tets();
+    let err = model
+        .set_material(&Material {
+            mu: vec![1e4; m],
+            lambda: vec![f64::INFINITY; m],
+            density: vec![0.0; m],
+        })
+        .unwrap_err();
+    assert!(err.to_string().contains("`lambda`"), "{err}");
+    let err = model
+        .set_material(&Material {
+            mu: vec![1e4; m - 1],
+            lambda: vec![1e5; m],
+            density: vec![0.0; m],
+        })
+        .unwrap_err();
+    assert!(err.to_string().contains("`mu`"), "{err}");
+}
+
+#[test]
+fn nonconvergence_is_an_error_with_a_residual_history() {
+    let mut model = cantilever(
+        [1.0, 0.1, 0.1],
+        [8, 2, 2],
+        66e3,
+        0.45,
+        1080.0,
+        Formulation::Standard,
+    );
+    let loads = Loads {
+        gravity: [0.0, 0.0, -9.81],
+        ..Default::default()
+    };
+    let options = SolveOptions {
+        max_iterations: 2,
+        max_cutbacks: 1,
+        ..Default::default()
+    };
+    match model.solve(&loads, None, &options) {
+        Err(sorofem_core::Error::NotConverged { report, message }) => {
+            assert!(
+                !report.converged && !report.residual_history.is_empty(),
+                "{message}"
+            );
+            assert!(message.contains("did not converge"));
+        }
+        other => panic!("expected NotConverged, got {other:?}"),
+    }
+}
