@@ -66,17 +66,42 @@ pub struct SparseFactor {
     symbolic: SymbolicCholesky<usize>,
     values: Vec<f64>,
     stored: Stored,
-    /// Expected pivot signs for LDL^T: +1 for displacement rows, -1 for pressure rows.
-    signs: Vec<i8>,
 }
 
 impl SparseFactor {
     /// Symbolic analysis with an approximate-minimum-degree ordering.
     pub fn analyse(pattern: &LowerPattern) -> Result<Self> {
+        Self::analyse_ordered(pattern, SymmetricOrdering::Amd)
+    }
+
+    /// Symbolic analysis with a given elimination order: `order[k]` is the unknown eliminated
+    /// k-th. Saddle-point systems need one that eliminates each pressure after the displacements
+    /// it couples to, so that no pivot is the (tiny) compliance alone.
+    pub fn analyse_with_order(pattern: &LowerPattern, order: &[usize]) -> Result<Self> {
+        let n = pattern.n;
+        let mut inverse = vec![usize::MAX; n];
+        for (k, &i) in order.iter().enumerate() {
+            if i < n {
+                inverse[i] = k;
+            }
+        }
+        if order.len() != n || inverse.contains(&usize::MAX) {
+            return Err(Error::LinearSolver {
+                message: "elimination order is not a permutation".into(),
+            });
+        }
+        let perm = faer::perm::PermRef::new_checked(order, &inverse, n);
+        Self::analyse_ordered(pattern, SymmetricOrdering::Custom(perm))
+    }
+
+    fn analyse_ordered(
+        pattern: &LowerPattern,
+        ordering: SymmetricOrdering<'_, usize>,
+    ) -> Result<Self> {
         let symbolic = factorize_symbolic_cholesky(
             pattern.symbolic(),
             Side::Lower,
-            SymmetricOrdering::Amd,
+            ordering,
             Default::default(),
         )
         .map_err(|e| Error::LinearSolver {
@@ -87,7 +112,6 @@ impl SparseFactor {
             symbolic,
             values,
             stored: Stored::None,
-            signs: Vec::new(),
         })
     }
 
@@ -126,47 +150,33 @@ impl SparseFactor {
         }
     }
 
-    /// Numeric `L D L^T` of a quasi-definite matrix whose first `n_positive` unknowns have
-    /// positive pivots and the rest negative ones. Tiny pivots of the wrong sign are regularised
-    /// (by `delta`, relative to the matrix scale) rather than failing.
-    pub fn factor_ldlt(
-        &mut self,
-        pattern: &LowerPattern,
-        values: &[f64],
-        n_positive: usize,
-    ) -> Result<()> {
+    /// Numeric `L D L^T` without pivoting, in the order fixed by the symbolic analysis. Meant for
+    /// quasi-definite saddle-point matrices `[[A, G^T], [G, -C]]` (A positive definite, C positive
+    /// semi-definite), which have such a factorisation in any order. Returns `Ok(false)` on a zero
+    /// or non-finite pivot; the caller checks the resulting direction (an indefinite A still
+    /// factors, so inertia is the caller's concern).
+    pub fn factor_ldlt(&mut self, pattern: &LowerPattern, values: &[f64]) -> Result<bool> {
         let par = faer::get_global_parallelism();
-        if self.signs.len() != pattern.n {
-            self.signs = (0..pattern.n)
-                .map(|i| if i < n_positive { 1 } else { -1 })
-                .collect();
-        }
-        let scale = values.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         let mat = SparseColMatRef::new(pattern.symbolic(), values);
         let req = self
             .symbolic
             .factorize_numeric_ldlt_scratch::<f64>(par, Default::default());
         let mut mem = MemBuffer::try_new(req).map_err(|_| oom())?;
-        let regularization = LdltRegularization {
-            dynamic_regularization_signs: Some(&self.signs),
-            dynamic_regularization_delta: scale * 1e-14,
-            dynamic_regularization_epsilon: scale * 1e-20,
+        let result = self.symbolic.factorize_numeric_ldlt::<f64>(
+            &mut self.values,
+            mat,
+            Side::Lower,
+            LdltRegularization::default(),
+            par,
+            MemStack::new(&mut mem),
+            Default::default(),
+        );
+        self.stored = if result.is_ok() {
+            Stored::Ldlt
+        } else {
+            Stored::None
         };
-        self.symbolic
-            .factorize_numeric_ldlt::<f64>(
-                &mut self.values,
-                mat,
-                Side::Lower,
-                regularization,
-                par,
-                MemStack::new(&mut mem),
-                Default::default(),
-            )
-            .map_err(|e| Error::LinearSolver {
-                message: format!("LDL^T failed: {e:?}"),
-            })?;
-        self.stored = Stored::Ldlt;
-        Ok(())
+        Ok(result.is_ok())
     }
 
     /// Solves `A x = rhs` in place with the stored factorisation.
@@ -192,6 +202,27 @@ impl SparseFactor {
             Stored::None => panic!("solve_in_place called without a successful factorisation"),
         }
     }
+}
+
+/// Approximate-minimum-degree elimination order of a symmetric pattern (`order[k]` = unknown
+/// eliminated k-th).
+pub fn amd_order(pattern: &LowerPattern) -> Result<Vec<usize>> {
+    let n = pattern.n;
+    let mut order = vec![0usize; n];
+    let mut inverse = vec![0usize; n];
+    let req = faer::sparse::linalg::amd::order_scratch::<usize>(n, pattern.nnz());
+    let mut mem = MemBuffer::try_new(req).map_err(|_| oom())?;
+    faer::sparse::linalg::amd::order(
+        &mut order,
+        &mut inverse,
+        pattern.symbolic(),
+        Default::default(),
+        MemStack::new(&mut mem),
+    )
+    .map_err(|e| Error::LinearSolver {
+        message: format!("AMD ordering failed: {e:?}"),
+    })?;
+    Ok(order)
 }
 
 fn oom() -> Error {
@@ -255,7 +286,7 @@ mod tests {
         };
         let v = vec![2.0, 1.0, -1e-8];
         let mut f = SparseFactor::analyse(&p).unwrap();
-        f.factor_ldlt(&p, &v, 1).unwrap();
+        assert!(f.factor_ldlt(&p, &v).unwrap());
         let x = [0.3, -0.7];
         let mut b = p.symmetric_matvec(&v, &x);
         f.solve_in_place(&mut b);

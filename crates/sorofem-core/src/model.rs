@@ -49,12 +49,6 @@ pub struct Solution {
     pub report: SolveReport,
 }
 
-/// Factorised pressure compliance `C` (mixed formulation): `p* = C^{-1} phi(x)`.
-struct PressureSolver {
-    assembler: Assembler,
-    factor: SparseFactor,
-}
-
 pub struct Model {
     mesh: Arc<TetMesh>,
     fixed_nodes: Vec<usize>,
@@ -63,7 +57,11 @@ pub struct Model {
     density: Vec<f64>,
     assembler: Assembler,
     factor: SparseFactor,
-    pressure: Option<PressureSolver>,
+    /// Weight (Pa/m) of the volume-constraint residual rows (m^3) in the mixed residual norm,
+    /// so that they are measured in N like the force rows: `mean(mu) / mean edge length`.
+    pressure_weight: f64,
+    /// Nodal pressures of the last mixed solve, the starting guess of the next one.
+    last_pressure: Option<Vec<f64>>,
     material_set: bool,
 }
 
@@ -121,17 +119,18 @@ impl Model {
             fixed_dofs[3 * node..3 * node + 3].fill(true);
         }
         let assembler = Assembler::new(&fixed_dofs, &[&elastic]);
-        let factor = SparseFactor::analyse(assembler.pattern())?;
-        let pressure = match formulation {
-            Formulation::Standard => None,
+        let factor = match formulation {
+            Formulation::Standard => SparseFactor::analyse(assembler.pattern())?,
             Formulation::Mixed { mass } => {
                 let compliance = PressureCompliance {
                     elastic: &elastic,
                     mass,
                 };
-                let assembler = Assembler::new(&vec![false; n], &[&compliance]);
-                let factor = SparseFactor::analyse(assembler.pattern())?;
-                Some(PressureSolver { assembler, factor })
+                // The pressure unknowns live on the nodes, so this pattern is the node graph.
+                let node_graph = Assembler::new(&vec![false; n], &[&compliance]);
+                let node_order = crate::linear::amd_order(node_graph.pattern())?;
+                let order = saddle_point_order(&assembler, &node_order, &fixed_set);
+                SparseFactor::analyse_with_order(assembler.pattern(), &order)?
             }
         };
         Ok(Model {
@@ -142,7 +141,8 @@ impl Model {
             density: vec![0.0; n_tets],
             assembler,
             factor,
-            pressure,
+            pressure_weight: 1.0,
+            last_pressure: None,
             material_set: false,
         })
     }
@@ -218,33 +218,20 @@ impl Model {
         self.elastic.mu.clone_from(&material.mu);
         self.elastic.lambda.clone_from(&material.lambda);
         self.density.clone_from(&material.density);
-        if let (Some(pressure), Formulation::Mixed { mass }) =
-            (self.pressure.as_mut(), self.formulation)
-        {
-            let compliance = PressureCompliance {
-                elastic: &self.elastic,
-                mass,
-            };
-            let zero = vec![0.0; self.mesh.n_nodes()];
-            let c =
-                pressure
-                    .assembler
-                    .evaluate(&[&compliance], &zero, false, Some(HessianMode::Exact));
-            if !pressure
-                .factor
-                .factor_llt(pressure.assembler.pattern(), &c.hessian)?
-            {
-                return Err(Error::LinearSolver {
-                    message: "pressure mass matrix is not positive definite".into(),
-                });
-            }
+        if matches!(self.formulation, Formulation::Mixed { .. }) {
+            let m = m as f64;
+            let mean_mu = material.mu.iter().sum::<f64>() / m;
+            let mean_edge =
+                (self.mesh.volumes().iter().sum::<f64>() / m * 6.0 * 2f64.sqrt()).cbrt();
+            self.pressure_weight = mean_mu / mean_edge;
         }
         self.material_set = true;
         Ok(())
     }
 
     /// Static equilibrium under `loads`, starting from `initial` positions (3 n, m) or the rest shape.
-    /// Internally the unknowns are displacements from the rest shape.
+    /// Internally the unknowns are displacements from the rest shape. In the mixed formulation a
+    /// warm start (`initial` given) also starts from the pressures of the previous solve.
     pub fn solve(
         &mut self,
         loads: &Loads,
@@ -296,6 +283,10 @@ impl Model {
                 for (zi, (xi, ri)) in z.iter_mut().zip(x.iter().zip(self.mesh.rest_flat())) {
                     *zi = xi - ri;
                 }
+                // A warm start continues from the last equilibrium, pressures included.
+                if let Some(p) = &self.last_pressure {
+                    z[3 * n..].copy_from_slice(p);
+                }
             }
             None => {}
         }
@@ -326,6 +317,7 @@ impl Model {
         let report = newton::solve(&mut problem, &mut z, options)?;
         let pressure =
             matches!(self.formulation, Formulation::Mixed { .. }).then(|| z[3 * n..].to_vec());
+        self.last_pressure.clone_from(&pressure);
         z.truncate(3 * n);
         for (zi, ri) in z.iter_mut().zip(self.mesh.rest_flat()) {
             *zi += ri;
@@ -370,6 +362,27 @@ impl Model {
     }
 }
 
+/// Elimination order of the mixed saddle-point system: nodes in fill-reducing (AMD) order, each
+/// node's free displacements before its pressure, and the pressures of fixed nodes (which couple
+/// to no displacement of their own) last. Every pressure pivot then carries `G K^{-1} G^T` and
+/// not just the compliance `C = M_p / lambda`, which vanishes as nu -> 0.5.
+fn saddle_point_order(assembler: &Assembler, node_order: &[usize], fixed: &[bool]) -> Vec<usize> {
+    let n = fixed.len();
+    let mut order = Vec::with_capacity(assembler.n_free());
+    for &node in node_order {
+        for d in 3 * node..3 * node + 3 {
+            order.extend(assembler.free_of_full(d));
+        }
+        if !fixed[node] {
+            order.extend(assembler.free_of_full(3 * n + node));
+        }
+    }
+    for node in (0..n).filter(|&i| fixed[i]) {
+        order.extend(assembler.free_of_full(3 * n + node));
+    }
+    order
+}
+
 /// The Newton view of a model at a load factor.
 struct System<'a> {
     model: &'a mut Model,
@@ -385,25 +398,8 @@ impl System<'_> {
         self.model.mesh.n_nodes()
     }
 
-    /// Replaces the pressures in `z` by their optimum `p* = C^{-1} phi(x)` (mixed only).
-    fn update_pressure(&mut self, z: &mut [f64]) -> bool {
-        let n = self.n_nodes();
-        let Some(pressure) = self.model.pressure.as_ref() else {
-            return true;
-        };
-        z[3 * n..].fill(0.0);
-        let eval = self
-            .model
-            .assembler
-            .evaluate(&[&self.model.elastic], z, true, None);
-        if !eval.energy.is_finite() {
-            return false;
-        }
-        // Pressure DOFs are never fixed and come last, so they are the last n free DOFs.
-        let mut phi = eval.gradient[eval.gradient.len() - n..].to_vec();
-        pressure.factor.solve_in_place(&mut phi);
-        z[3 * n..].copy_from_slice(&phi);
-        true
+    fn is_mixed(&self) -> bool {
+        matches!(self.model.formulation, Formulation::Mixed { .. })
     }
 }
 
@@ -433,34 +429,64 @@ impl NewtonProblem for System<'_> {
         self.load_free_norm
     }
 
+    /// Standard: the potential energy. Mixed: half the squared weighted residual of the
+    /// saddle-point system. The pressure is a Lagrange multiplier, so the mixed energy has no
+    /// minimum to descend to, and eliminating p through `C p = phi` would amplify the
+    /// second-order constraint error of every step by lambda (tiny steps as nu -> 0.5).
     fn merit(&mut self, z: &mut [f64]) -> f64 {
-        let external: f64 = self.load.iter().zip(z.iter()).map(|(f, x)| f * x).sum();
-        if self.model.pressure.is_some() {
-            if !self.update_pressure(z) {
+        if self.is_mixed() {
+            let g = self.gradient(z);
+            if g.iter().any(|v| !v.is_finite()) {
                 return f64::INFINITY;
             }
-            // Pi_c(x) = Pi(x, p*) = W_mu(x) + 1/2 phi^T p*, evaluated directly at p*.
+            return 0.5 * g.iter().map(|v| v * v).sum::<f64>();
         }
+        let external: f64 = self.load.iter().zip(z.iter()).map(|(f, x)| f * x).sum();
         self.model.assembler.energy(&[&self.model.elastic], z) - external
     }
 
+    /// Gradient of the energy minus the loads; in the mixed formulation the volume-constraint
+    /// rows (m^3) are multiplied by the pressure weight so that they are forces too.
     fn gradient(&mut self, z: &[f64]) -> Vec<f64> {
-        let mut g = self
+        let eval = self
             .model
             .assembler
-            .evaluate(&[&self.model.elastic], z, true, None)
-            .gradient;
+            .evaluate(&[&self.model.elastic], z, true, None);
+        if !eval.energy.is_finite() {
+            return vec![f64::INFINITY; eval.gradient.len()];
+        }
+        let mut g = eval.gradient;
         for (gi, &d) in g.iter_mut().zip(self.model.assembler.full_of_free()) {
             *gi -= self.load[d];
         }
-        if self.model.pressure.is_some() {
-            // At p = p* the pressure rows of the gradient vanish up to round-off; the Newton
-            // residual is the displacement part.
+        if self.is_mixed() {
             let n = self.n_nodes();
             let len = g.len();
-            g[len - n..].fill(0.0);
+            g[len - n..]
+                .iter_mut()
+                .for_each(|v| *v *= self.model.pressure_weight);
         }
         g
+    }
+
+    fn slope(&self, g: &[f64], d: &[f64]) -> f64 {
+        if self.is_mixed() {
+            // d is an exact Newton step of the residual g, so d/dt (|g|^2 / 2) = -|g|^2.
+            -g.iter().map(|v| v * v).sum::<f64>()
+        } else {
+            g.iter().zip(d).map(|(a, b)| a * b).sum()
+        }
+    }
+
+    fn nonmonotone_factor(&self) -> f64 {
+        // Half the squared residual may grow 100-fold (the residual 10-fold) over the recent
+        // maximum: full Newton steps of the saddle-point system are then accepted far from the
+        // solution, where the Armijo test on the residual would creep in 1/16 steps.
+        if self.is_mixed() {
+            100.0
+        } else {
+            0.0
+        }
     }
 
     fn direction(
@@ -485,13 +511,7 @@ impl NewtonProblem for System<'_> {
         let t0 = Instant::now();
         let ok = match self.model.formulation {
             Formulation::Standard => self.model.factor.factor_llt(pattern, &eval.hessian)?,
-            Formulation::Mixed { .. } => {
-                let n_displacement = self.n_free() - self.n_nodes();
-                self.model
-                    .factor
-                    .factor_ldlt(pattern, &eval.hessian, n_displacement)?;
-                true
-            }
+            Formulation::Mixed { .. } => self.model.factor.factor_ldlt(pattern, &eval.hessian)?,
         };
         timings.factorization += t0.elapsed().as_secs_f64();
         if !ok {
@@ -499,13 +519,20 @@ impl NewtonProblem for System<'_> {
         }
         let t0 = Instant::now();
         let mut d: Vec<f64> = g.iter().map(|v| -v).collect();
+        if self.is_mixed() {
+            let n = self.n_nodes();
+            let len = d.len();
+            d[len - n..]
+                .iter_mut()
+                .for_each(|v| *v /= self.model.pressure_weight);
+        }
         self.model.factor.solve_in_place(&mut d);
         timings.solve += t0.elapsed().as_secs_f64();
-        let slope: f64 = d.iter().zip(g).map(|(a, b)| a * b).sum();
-        if !(slope < 0.0) {
-            return Ok(None);
+        if self.is_mixed() {
+            return Ok(d.iter().all(|v| v.is_finite()).then_some(d));
         }
-        Ok(Some(d))
+        let slope: f64 = d.iter().zip(g).map(|(a, b)| a * b).sum();
+        Ok((slope < 0.0).then_some(d))
     }
 
     fn step(&self, z: &mut [f64], d: &[f64], t: f64) {

@@ -29,6 +29,8 @@ pub struct SolveReport {
     pub residual_history: Vec<f64>,
     /// Merit energy (J) at the same iterates.
     pub energy_history: Vec<f64>,
+    /// Accepted line-search step length of every Newton iteration (1 = full Newton step).
+    pub step_lengths: Vec<f64>,
     /// Accepted load steps.
     pub load_steps: usize,
     /// Times a load step failed and was halved.
@@ -87,6 +89,16 @@ pub trait NewtonProblem {
         projected: bool,
         timings: &mut Timings,
     ) -> Result<Option<Vec<f64>>>;
+    /// Derivative of the merit along `d` at `t = 0`, given the gradient `g` there.
+    fn slope(&self, g: &[f64], d: &[f64]) -> f64 {
+        dot(g, d)
+    }
+    /// Non-monotone line search: a step is also accepted when its merit is at most this factor
+    /// times the largest merit of the last five iterates (0: plain Armijo backtracking). Used
+    /// with residual merits, whose Armijo test stalls far from the solution.
+    fn nonmonotone_factor(&self) -> f64 {
+        0.0
+    }
     /// Adds `t d` (free DOFs) to `z`.
     fn step(&self, z: &mut [f64], d: &[f64], t: f64);
 }
@@ -197,7 +209,14 @@ fn newton_step(
             });
         };
         t0 = Instant::now();
-        let slope = dot(&g, &d);
+        let slope = problem.slope(&g, &d);
+        // The largest merit of the last five iterates, for the non-monotone acceptance test.
+        let window_max = report
+            .energy_history
+            .iter()
+            .rev()
+            .take(5)
+            .fold(energy, |m, &e| m.max(e));
         let mut t = 1.0;
         let mut accepted = false;
         let mut trial = z.to_vec();
@@ -206,7 +225,9 @@ fn newton_step(
             problem.step(&mut trial, &d, t);
             let e_trial = problem.merit(&mut trial);
             if e_trial.is_finite() {
-                if e_trial <= energy + 1e-4 * t * slope {
+                if e_trial <= energy + 1e-4 * t * slope
+                    || e_trial <= problem.nonmonotone_factor() * window_max
+                {
                     accepted = true;
                 } else if (e_trial - energy).abs() <= 1e-11 * energy.abs().max(f64::MIN_POSITIVE) {
                     // The energy change is below its round-off: judge by the residual instead.
@@ -220,11 +241,13 @@ fn newton_step(
             }
             t *= 0.5;
         }
-        report.timings.line_search += t0.elapsed().as_secs_f64();
         if !accepted {
+            report.timings.line_search += t0.elapsed().as_secs_f64();
             return Ok(false);
         }
+        report.timings.line_search += t0.elapsed().as_secs_f64();
         z.copy_from_slice(&trial);
+        report.step_lengths.push(t);
         t0 = Instant::now();
         g = problem.gradient(z);
         report.timings.assembly += t0.elapsed().as_secs_f64();

@@ -1,0 +1,48 @@
+# The README's Quick start: `make demo` and `make test`. Everything else is for developers.
+PYTHON ?= python3.11
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.deps-stamp
+BUILD_STAMP := $(VENV)/.build-stamp
+RUST_SOURCES := $(shell find crates -name '*.rs' -o -name Cargo.toml) Cargo.toml pyproject.toml
+
+.PHONY: demo test test-rust test-python test-all bench build fmt clean
+
+$(STAMP): pyproject.toml
+	@command -v $(PYTHON) >/dev/null || { echo "error: $(PYTHON) not found (set PYTHON=...)"; exit 1; }
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet "maturin>=1.5,<2.0" "numpy>=1.24" "scipy>=1.10" "meshio>=5.3" "matplotlib>=3.7" "pytest>=7"
+	touch $(STAMP)
+
+$(BUILD_STAMP): $(STAMP) $(RUST_SOURCES)
+	VIRTUAL_ENV=$(abspath $(VENV)) PATH=$(abspath $(VENV))/bin:$$PATH $(VENV)/bin/maturin develop --release --quiet
+	touch $(BUILD_STAMP)
+
+build: $(BUILD_STAMP)
+
+demo: build
+	$(PY) examples/01_cantilever_gravity.py --out results/demo
+
+test-rust:
+	cargo test --release -p sorofem-core
+
+test-python: build
+	$(PY) -m pytest -q
+
+test: test-rust test-python
+
+test-all: build
+	cargo test --release -p sorofem-core -- --include-ignored
+	$(PY) -m pytest -q -m ""
+
+bench: build
+	$(PY) -m pip install --quiet "scikit-fem>=10"
+	$(PY) benchmarks/run.py --write BENCHMARKS.md
+	$(PY) -m pytest -q -m bench
+
+fmt:
+	cargo fmt --all
+
+clean:
+	rm -rf target $(VENV) results

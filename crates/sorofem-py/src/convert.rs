@@ -1,0 +1,127 @@
+//! Every numpy conversion and shape check of the bindings, in one place. Messages name the
+//! parameter, the expected shape and dtype, and what was given.
+
+use numpy::{
+    PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
+};
+use pyo3::prelude::*;
+use sorofem_core::Error;
+
+fn shape_error(param: &str, expected: &str, given: String) -> Error {
+    Error::shape(param, expected, given)
+}
+
+/// An `(n, 3)` float64 array as node-major triples.
+pub fn points(param: &str, array: &Bound<'_, PyAny>) -> Result<Vec<[f64; 3]>, Error> {
+    let array: PyReadonlyArray2<f64> = array
+        .extract()
+        .map_err(|_| shape_error(param, "a float64 array of shape (n, 3)", describe(array)))?;
+    let shape = array.shape();
+    if shape[1] != 3 {
+        return Err(shape_error(
+            param,
+            "shape (n, 3)",
+            format!("shape ({}, {})", shape[0], shape[1]),
+        ));
+    }
+    let view = array.as_array();
+    Ok(view
+        .rows()
+        .into_iter()
+        .map(|r| [r[0], r[1], r[2]])
+        .collect())
+}
+
+/// An `(m, 4)` integer array.
+pub fn tets(param: &str, array: &Bound<'_, PyAny>) -> Result<Vec<[i64; 4]>, Error> {
+    let array: PyReadonlyArray2<i64> = array
+        .extract()
+        .map_err(|_| shape_error(param, "an int64 array of shape (m, 4)", describe(array)))?;
+    let shape = array.shape();
+    if shape[1] != 4 {
+        return Err(shape_error(
+            param,
+            "shape (m, 4)",
+            format!("shape ({}, {})", shape[0], shape[1]),
+        ));
+    }
+    Ok(array
+        .as_array()
+        .rows()
+        .into_iter()
+        .map(|r| [r[0], r[1], r[2], r[3]])
+        .collect())
+}
+
+/// A 1-d float64 array of length `len` (any length when `None`).
+pub fn vector(
+    param: &str,
+    array: &Bound<'_, PyAny>,
+    len: Option<usize>,
+) -> Result<Vec<f64>, Error> {
+    let array: PyReadonlyArray1<f64> = array
+        .extract()
+        .map_err(|_| shape_error(param, "a 1-d float64 array", describe(array)))?;
+    let values = array.as_array().to_vec();
+    if let Some(len) = len {
+        if values.len() != len {
+            return Err(shape_error(
+                param,
+                &format!("shape ({len},)"),
+                format!("shape ({},)", values.len()),
+            ));
+        }
+    }
+    Ok(values)
+}
+
+/// A 1-d int64 array.
+pub fn indices(param: &str, array: &Bound<'_, PyAny>) -> Result<Vec<i64>, Error> {
+    let array: PyReadonlyArray1<i64> = array
+        .extract()
+        .map_err(|_| shape_error(param, "a 1-d int64 array", describe(array)))?;
+    Ok(array.as_array().to_vec())
+}
+
+/// A length-3 float64 vector.
+pub fn vec3(param: &str, array: &Bound<'_, PyAny>) -> Result<[f64; 3], Error> {
+    let v = vector(param, array, Some(3))?;
+    Ok([v[0], v[1], v[2]])
+}
+
+fn describe(object: &Bound<'_, PyAny>) -> String {
+    let shape = object.getattr("shape").ok().map(|s| s.to_string());
+    let dtype = object.getattr("dtype").ok().map(|s| s.to_string());
+    match (shape, dtype) {
+        (Some(shape), Some(dtype)) => format!("an array of shape {shape} and dtype {dtype}"),
+        _ => format!(
+            "a {}",
+            object
+                .get_type()
+                .name()
+                .map(|n| n.to_string())
+                .unwrap_or_default()
+        ),
+    }
+}
+
+pub fn points_to_numpy<'py>(py: Python<'py>, flat: &[f64]) -> Bound<'py, PyArray2<f64>> {
+    let n = flat.len() / 3;
+    PyArray1::from_slice(py, flat)
+        .reshape([n, 3])
+        .expect("3 n values")
+}
+
+pub fn tets_to_numpy<'py>(py: Python<'py>, tets: &[[usize; 4]]) -> Bound<'py, PyArray2<i64>> {
+    let flat: Vec<i64> = tets.iter().flatten().map(|&i| i as i64).collect();
+    PyArray1::from_vec(py, flat)
+        .reshape([tets.len(), 4])
+        .expect("4 m values")
+}
+
+pub fn faces_to_numpy<'py>(py: Python<'py>, faces: &[[usize; 3]]) -> Bound<'py, PyArray2<i64>> {
+    let flat: Vec<i64> = faces.iter().flatten().map(|&i| i as i64).collect();
+    PyArray1::from_vec(py, flat)
+        .reshape([faces.len(), 3])
+        .expect("3 k values")
+}

@@ -1,0 +1,308 @@
+//! `sorofem._core`: the Python face of sorofem-core. Plumbing only: conversions live in
+//! `convert`, error mapping in `errors`, and every function here forwards to the core.
+
+mod convert;
+mod errors;
+
+use errors::{report_to_dict, IntoPyResult};
+use numpy::{PyArray1, PyArray2};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use sorofem_core::material::Volumetric;
+use sorofem_core::{
+    Formulation, Loads, Material, Orientation, PressureMass, SolveOptions, TetMesh,
+};
+use std::sync::Arc;
+
+fn build_mesh(
+    py: Python<'_>,
+    points: &Bound<'_, PyAny>,
+    tets: &Bound<'_, PyAny>,
+    orientation: Orientation,
+) -> PyResult<(TetMesh, Vec<usize>)> {
+    let points = convert::points("points", points).py(py)?;
+    let tets = convert::tets("tets", tets).py(py)?;
+    py.detach(|| TetMesh::try_new(points, &tets, orientation))
+        .py(py)
+}
+
+fn orientation_from(py: Python<'_>, name: &str) -> PyResult<Orientation> {
+    match name {
+        "reorient" => Ok(Orientation::Reorient),
+        "reject" => Ok(Orientation::Reject),
+        other => Err(errors::to_py(
+            py,
+            sorofem_core::Error::invalid(
+                "orientation",
+                "\"reorient\" or \"reject\"",
+                format!("{other:?}"),
+            ),
+        )),
+    }
+}
+
+/// Box mesh `[origin, origin + size]` with `cells` hexahedra split into 6 tets each.
+#[pyfunction]
+fn box_mesh<'py>(
+    py: Python<'py>,
+    size: &Bound<'py, PyAny>,
+    cells: &Bound<'py, PyAny>,
+    origin: &Bound<'py, PyAny>,
+) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<i64>>)> {
+    let size = convert::vec3("size", size).py(py)?;
+    let cells = convert::indices("cells", cells).py(py)?;
+    if cells.len() != 3 || cells.iter().any(|&c| c < 1) {
+        return Err(errors::to_py(
+            py,
+            sorofem_core::Error::invalid(
+                "cells",
+                "three positive cell counts",
+                format!("{cells:?}"),
+            ),
+        ));
+    }
+    let origin = convert::vec3("origin", origin).py(py)?;
+    let mesh = TetMesh::box_mesh(
+        size,
+        [cells[0] as usize, cells[1] as usize, cells[2] as usize],
+        origin,
+    )
+    .py(py)?;
+    Ok((
+        convert::points_to_numpy(py, &mesh.rest_flat()),
+        convert::tets_to_numpy(py, mesh.tets()),
+    ))
+}
+
+/// Validates a mesh; returns the (possibly reoriented) tets and the indices of reoriented ones.
+#[pyfunction]
+#[pyo3(signature = (points, tets, orientation = "reorient"))]
+fn check_mesh<'py>(
+    py: Python<'py>,
+    points: &Bound<'py, PyAny>,
+    tets: &Bound<'py, PyAny>,
+    orientation: &str,
+) -> PyResult<(Bound<'py, PyArray2<i64>>, Bound<'py, PyArray1<i64>>)> {
+    let orientation = orientation_from(py, orientation)?;
+    let (mesh, reoriented) = build_mesh(py, points, tets, orientation)?;
+    let reoriented: Vec<i64> = reoriented.into_iter().map(|e| e as i64).collect();
+    Ok((
+        convert::tets_to_numpy(py, mesh.tets()),
+        PyArray1::from_vec(py, reoriented),
+    ))
+}
+
+/// Rest volumes (m^3) of a valid mesh.
+#[pyfunction]
+fn rest_volumes<'py>(
+    py: Python<'py>,
+    points: &Bound<'py, PyAny>,
+    tets: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let (mesh, _) = build_mesh(py, points, tets, Orientation::Reject)?;
+    Ok(PyArray1::from_slice(py, mesh.volumes()))
+}
+
+/// Outward-oriented boundary triangles of a valid mesh.
+#[pyfunction]
+fn boundary_faces<'py>(
+    py: Python<'py>,
+    points: &Bound<'py, PyAny>,
+    tets: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyArray2<i64>>> {
+    let (mesh, _) = build_mesh(py, points, tets, Orientation::Reject)?;
+    Ok(convert::faces_to_numpy(py, &mesh.boundary_faces()))
+}
+
+/// A body ready to be solved many times (see sorofem.model.Body, which owns one).
+#[pyclass(module = "sorofem._core")]
+struct Model {
+    inner: sorofem_core::Model,
+}
+
+#[pymethods]
+impl Model {
+    #[new]
+    #[pyo3(signature = (points, tets, fixed, formulation = "standard", options = None))]
+    fn new(
+        py: Python<'_>,
+        points: &Bound<'_, PyAny>,
+        tets: &Bound<'_, PyAny>,
+        fixed: &Bound<'_, PyAny>,
+        formulation: &str,
+        options: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Self> {
+        let (mesh, _) = build_mesh(py, points, tets, Orientation::Reject)?;
+        let fixed = convert::indices("fixed", fixed).py(py)?;
+        let option = |key: &str| -> PyResult<Option<String>> {
+            match options {
+                Some(o) => o.get_item(key)?.map(|v| v.extract::<String>()).transpose(),
+                None => Ok(None),
+            }
+        };
+        let volumetric = match option("volumetric")?.as_deref() {
+            None | Some("log") => Volumetric::Log,
+            Some("linear") => Volumetric::Linear,
+            Some(other) => {
+                return Err(errors::to_py(
+                    py,
+                    sorofem_core::Error::invalid(
+                        "volumetric",
+                        "\"log\" (c = ln J) or \"linear\" (c = J - 1)",
+                        format!("{other:?}"),
+                    ),
+                ))
+            }
+        };
+        let mass = match option("pressure_mass")?.as_deref() {
+            None | Some("consistent") => PressureMass::Consistent,
+            Some("lumped") => PressureMass::Lumped,
+            Some(other) => {
+                return Err(errors::to_py(
+                    py,
+                    sorofem_core::Error::invalid(
+                        "pressure_mass",
+                        "\"consistent\" or \"lumped\"",
+                        format!("{other:?}"),
+                    ),
+                ))
+            }
+        };
+        let formulation = match formulation {
+            "standard" => Formulation::Standard,
+            "mixed" => Formulation::Mixed { mass },
+            other => {
+                return Err(errors::to_py(
+                    py,
+                    sorofem_core::Error::invalid(
+                        "formulation",
+                        "\"standard\" or \"mixed\"",
+                        format!("{other:?}"),
+                    ),
+                ))
+            }
+        };
+        let mesh = Arc::new(mesh);
+        let inner = py
+            .detach(|| sorofem_core::Model::try_new(mesh, &fixed, formulation, volumetric))
+            .py(py)?;
+        Ok(Model { inner })
+    }
+
+    /// Per-tet shear modulus, Lame lambda (Pa) and density (kg/m^3).
+    fn set_material(
+        &mut self,
+        py: Python<'_>,
+        mu: &Bound<'_, PyAny>,
+        lam: &Bound<'_, PyAny>,
+        rho: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
+        let m = Some(self.inner.mesh().n_tets());
+        let material = Material {
+            mu: convert::vector("mu", mu, m).py(py)?,
+            lambda: convert::vector("lam", lam, m).py(py)?,
+            density: convert::vector("rho", rho, m).py(py)?,
+        };
+        let inner = &mut self.inner;
+        py.detach(|| inner.set_material(&material)).py(py)
+    }
+
+    /// Static equilibrium; returns a dict with "positions", "pressure" and the report entries.
+    #[pyo3(signature = (gravity, forces, prescribed, initial = None, tolerance = 1e-8, max_iterations = 50, load_steps = 1))]
+    #[allow(clippy::too_many_arguments)]
+    fn solve<'py>(
+        &mut self,
+        py: Python<'py>,
+        gravity: &Bound<'py, PyAny>,
+        forces: &Bound<'py, PyAny>,
+        prescribed: &Bound<'py, PyAny>,
+        initial: Option<&Bound<'py, PyAny>>,
+        tolerance: f64,
+        max_iterations: usize,
+        load_steps: usize,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let n = self.inner.mesh().n_nodes();
+        let gravity = convert::vec3("gravity", gravity).py(py)?;
+        let forces = convert::points("forces", forces).py(py)?;
+        if forces.len() != n {
+            return Err(errors::to_py(
+                py,
+                sorofem_core::Error::shape(
+                    "forces",
+                    format!("({n}, 3)"),
+                    format!("({}, 3)", forces.len()),
+                ),
+            ));
+        }
+        let nodal_forces = forces
+            .into_iter()
+            .enumerate()
+            .filter(|(_, f)| f.iter().any(|&v| v != 0.0))
+            .collect();
+        let prescribed = convert::points("prescribed", prescribed).py(py)?;
+        let initial = initial
+            .filter(|i| !i.is_none())
+            .map(|i| convert::points("initial", i))
+            .transpose()
+            .py(py)?;
+        let initial_flat: Option<Vec<f64>> = initial.map(|p| p.into_iter().flatten().collect());
+        let loads = Loads {
+            gravity,
+            nodal_forces,
+            prescribed,
+        };
+        let options = SolveOptions {
+            tolerance,
+            max_iterations,
+            load_steps,
+            ..Default::default()
+        };
+        let inner = &mut self.inner;
+        let solution = py
+            .detach(|| inner.solve(&loads, initial_flat.as_deref(), &options))
+            .py(py)?;
+        let out = report_to_dict(py, &solution.report)?;
+        out.set_item(
+            "positions",
+            convert::points_to_numpy(py, &solution.positions),
+        )?;
+        match solution.pressure {
+            Some(p) => out.set_item("pressure", PyArray1::from_vec(py, p))?,
+            None => out.set_item("pressure", py.None())?,
+        }
+        Ok(out)
+    }
+
+    /// Per-tet J and von Mises stress (Pa) at positions (n, 3).
+    fn element_fields<'py>(
+        &self,
+        py: Python<'py>,
+        positions: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let positions: Vec<f64> = convert::points("positions", positions)
+            .py(py)?
+            .into_iter()
+            .flatten()
+            .collect();
+        let (j, vm) = self.inner.element_fields(&positions).py(py)?;
+        let out = PyDict::new(py);
+        out.set_item("J", PyArray1::from_vec(py, j))?;
+        out.set_item("von_mises", PyArray1::from_vec(py, vm))?;
+        Ok(out)
+    }
+
+    #[getter]
+    fn n_free(&self) -> usize {
+        self.inner.n_free()
+    }
+}
+
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(box_mesh, m)?)?;
+    m.add_function(wrap_pyfunction!(check_mesh, m)?)?;
+    m.add_function(wrap_pyfunction!(rest_volumes, m)?)?;
+    m.add_function(wrap_pyfunction!(boundary_faces, m)?)?;
+    m.add_class::<Model>()?;
+    Ok(())
+}

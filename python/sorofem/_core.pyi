@@ -1,0 +1,92 @@
+"""Type stubs of the compiled extension ``sorofem._core`` (crates/sorofem-py).
+
+Internal API: users go through :mod:`sorofem`. Units SI, float64, node-major DOF
+ordering, index arrays int64. Errors are the classes of :mod:`sorofem.errors`.
+"""
+
+from typing import Any, TypedDict
+
+import numpy as np
+from numpy.typing import NDArray
+
+_F = NDArray[np.float64]
+_I = NDArray[np.int64]
+
+class _Timings(TypedDict):
+    assembly: float
+    factorization: float
+    solve: float
+    line_search: float
+    total: float
+
+class _Report(TypedDict):
+    converged: bool
+    iterations: int  # Newton iterations over all load steps
+    residual_history: list[float]  # relative residual norms
+    energy_history: list[float]  # J
+    load_steps: int  # accepted load steps
+    cutbacks: int
+    projected_steps: int
+    residual_norm: float  # final absolute residual, N
+    reference_norm: float  # N
+    message: str
+    timings: _Timings
+
+class _SolveOutput(_Report):
+    positions: _F  # (n, 3)
+    pressure: _F | None  # (n,) for mixed formulations, else None
+
+class _ElementFields(TypedDict):
+    J: _F  # (m,)
+    von_mises: _F  # (m,) Cauchy von Mises stress, Pa
+
+def box_mesh(size: _F, cells: _I, origin: _F) -> tuple[_F, _I]:
+    """Hex grid split into 6 tets per hex; node (i, j, k) -> i + (nx+1)*(j + (ny+1)*k).
+
+    Returns points (n, 3) and tets (m, 4)."""
+
+def check_mesh(points: _F, tets: _I, orientation: str = "reorient") -> tuple[_I, _I]:
+    """Validate a mesh (raises MeshError); orientation "reorient" | "reject".
+
+    Returns the (possibly reoriented) tets (m, 4) and the reoriented tet indices (r,)."""
+
+def rest_volumes(points: _F, tets: _I) -> _F:
+    """Rest volume per tet, (m,), m^3."""
+
+def boundary_faces(points: _F, tets: _I) -> _I:
+    """Outward-oriented boundary triangles, (k, 3)."""
+
+class Model:
+    """Discrete model of one body with a fixed node set; caches the sparsity pattern and
+    the symbolic factorisation."""
+
+    def __init__(
+        self,
+        points: _F,
+        tets: _I,
+        fixed: _I,
+        formulation: str = "standard",
+        options: dict[str, Any] | None = None,
+    ) -> None:
+        """formulation "standard" | "mixed"; options: "volumetric" ("log" | "linear"),
+        "pressure_mass" ("consistent" | "lumped", mixed only)."""
+    @property
+    def n_free(self) -> int:
+        """Number of free degrees of freedom."""
+    def set_material(self, mu: _F, lam: _F, rho: _F) -> None:
+        """Per-element shear modulus, Lame lambda (Pa) and density (kg/m^3), each (m,)."""
+    def solve(
+        self,
+        gravity: _F,
+        forces: _F,
+        prescribed: _F,
+        initial: _F | None = None,
+        tolerance: float = 1e-8,
+        max_iterations: int = 50,
+        load_steps: int = 1,
+    ) -> _SolveOutput:
+        """Static equilibrium. gravity (3,), forces (n, 3), prescribed (k, 3) aligned with
+        `fixed`, initial positions (n, 3) or None; max_iterations is per load step.
+        Raises ConvergenceError whose `.report` is a _Report."""
+    def element_fields(self, positions: _F) -> _ElementFields:
+        """Per-element J and von Mises stress at the given positions (n, 3)."""

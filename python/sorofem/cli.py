@@ -1,0 +1,275 @@
+"""The ``sorofem`` command.
+
+Usage::
+
+    sorofem run SCENE.toml --out DIR [--quiet] [--json]
+    sorofem info MESH [--scale S] [--json]
+    sorofem --version
+
+``run`` writes ``DIR/result.vtu``, ``DIR/summary.json``, ``DIR/shape.png`` and
+``DIR/convergence.png``. It only ever writes those names and never deletes anything.
+
+Exit codes: 0 success; 2 bad input (scene, mesh or arguments: one ``error: ...`` line on
+stderr); 3 the solver failed (``summary.json`` is still written, with
+``"converged": false`` and the solver report); 1 an unexpected error (a bug: please report
+it with the traceback).
+
+Examples
+--------
+>>> from sorofem.cli import main
+>>> main(["run", "cantilever.toml", "--out", "results/cantilever"])  # doctest: +SKIP
+0
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import traceback
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from .errors import InputError, SolverError
+
+__all__ = ["main"]
+
+EXIT_OK, EXIT_UNEXPECTED, EXIT_INPUT, EXIT_SOLVER = 0, 1, 2, 3
+OUTPUT_NAMES = ("result.vtu", "summary.json", "shape.png", "convergence.png")
+#: Radius ratio below which a tet counts as bad in `sorofem info` (1 = regular tet).
+BAD_QUALITY = 0.1
+
+
+class _UsageError(Exception):
+    pass
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that raises instead of printing usage, so every input error is one line."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        raise _UsageError(f"{message} (see '{self.prog} --help')")
+
+
+def _version() -> str:
+    from . import __version__
+
+    return __version__
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="sorofem", description="Simulate cable-driven silicone soft robots.")
+    parser.add_argument("--version", action="version", version=f"sorofem {_version()}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+
+    run = sub.add_parser("run", help="solve a scene file and write results")
+    run.add_argument("scene", type=Path, help="TOML scene file")
+    run.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder (created)")
+    run.add_argument("--quiet", action="store_true", help="print nothing on success")
+    run.add_argument("--json", action="store_true", help="print summary.json to stdout instead of text")
+
+    info = sub.add_parser("info", help="print statistics of a mesh file")
+    info.add_argument("mesh", type=Path, help="mesh file (.tet or any format meshio reads)")
+    info.add_argument("--scale", type=float, default=1.0, help="coordinate scale factor (default 1)")
+    info.add_argument("--json", action="store_true", help="print as JSON")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit code (see the module docstring)."""
+    try:
+        args = _build_parser().parse_args(argv)
+        if args.command == "run":
+            return _run(args)
+        return _info(args)
+    except (_UsageError, InputError, FileNotFoundError, NotADirectoryError, IsADirectoryError,
+            PermissionError) as exc:
+        print(f"error: {_one_line(exc)}", file=sys.stderr)
+        return EXIT_INPUT
+    except SolverError as exc:
+        print(f"error: solver failed: {_one_line(exc)}", file=sys.stderr)
+        return EXIT_SOLVER
+    except SystemExit as exc:  # --help and --version exit through argparse
+        return exc.code if isinstance(exc.code, int) else EXIT_OK
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        return 130
+    except Exception:  # noqa: BLE001 - last resort: report a bug with its traceback
+        traceback.print_exc()
+        print("error: unexpected internal error (a bug; please report it with the traceback above)",
+              file=sys.stderr)
+        return EXIT_UNEXPECTED
+
+
+def _one_line(exc: BaseException) -> str:
+    text = str(exc) or type(exc).__name__
+    if isinstance(exc, OSError) and exc.filename is not None and exc.strerror:
+        text = f"{exc.strerror}: {exc.filename}"
+    return " ".join(text.split())
+
+
+def _jsonable(value: Any) -> Any:
+    """JSON without NaN/Infinity (not valid JSON): they become null."""
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist())
+    if isinstance(value, (np.floating, float)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    return value
+
+
+def _write_json(path: Path, data: dict[str, Any]) -> str:
+    text = json.dumps(_jsonable(data), indent=2) + "\n"
+    path.write_text(text, encoding="utf-8")
+    return text
+
+
+# ---------------------------------------------------------------------------
+# run
+
+
+def _run(args: argparse.Namespace) -> int:
+    from .errors import ConvergenceError
+    from .io import write_result
+    from .model import SolveReport
+    from .plot import plot_convergence, plot_rest_and_deformed
+    from .scene import Scene
+
+    scene = Scene.load(args.scene)
+    out: Path = args.out
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out: {out} exists and is not a folder")
+    outputs = {name: out / name for name in OUTPUT_NAMES}
+    protected = [p for p in (scene.path, scene.mesh.source) if p is not None]
+    for target in outputs.values():
+        for source in protected:
+            if target.resolve() == Path(source).resolve():
+                raise InputError(f"--out: writing {target.name} would overwrite the input file {source}")
+    out.mkdir(parents=True, exist_ok=True)
+
+    base = {
+        "scene": str(scene.path),
+        "n_nodes": scene.mesh.n_nodes,
+        "n_tets": scene.mesh.n_tets,
+        "formulation": scene.formulation,
+        "material": scene.material.to_dict(),
+        "gravity": scene.gravity.tolist(),
+        "solver_options": dict(scene.solver),
+    }
+    try:
+        result = scene.solve()
+    except SolverError as exc:
+        # Still leave a summary behind: it is what a user (or a script) inspects first.
+        raw = getattr(exc, "report", None)
+        report = raw if isinstance(raw, SolveReport) else SolveReport.from_dict(raw or {})
+        summary = {
+            **base,
+            "converged": False,
+            "newton_iterations": report.iterations,
+            "residual_norm": report.residual_norm,
+            "max_displacement": None,
+            "timings": report.timings,
+            "error": str(exc),
+            "report": report.to_dict(),
+        }
+        text = _write_json(outputs["summary.json"], summary)
+        if report.residual_history:
+            plot_convergence(report, outputs["convergence.png"], tolerance=scene.solver["tolerance"])
+        if args.json:
+            sys.stdout.write(text)
+        what = "did not converge" if isinstance(exc, ConvergenceError) else "failed"
+        print(f"error: solver {what}: {_one_line(exc)} (report in {outputs['summary.json']})", file=sys.stderr)
+        return EXIT_SOLVER
+
+    summary = {**base, **result.to_dict()}
+    write_result(outputs["result.vtu"], result)
+    text = _write_json(outputs["summary.json"], summary)
+    plot_rest_and_deformed(result, outputs["shape.png"], title=f"{scene.path.name}: max |u| = {result.max_displacement:.3g} m")
+    plot_convergence(result.report, outputs["convergence.png"], tolerance=scene.solver["tolerance"])
+
+    if args.json:
+        sys.stdout.write(text)
+    elif not args.quiet:
+        print(f"{scene.path.name}: {scene.mesh.n_nodes} nodes, {scene.mesh.n_tets} tets, {scene.formulation}")
+        print(result.report.summary())
+        print(f"max displacement {result.max_displacement:.6g} m, min J {result.J.min():.4f}, "
+              f"max von Mises {result.von_mises.max():.4g} Pa")
+        print(f"wrote {', '.join(OUTPUT_NAMES)} to {out}")
+    return EXIT_OK
+
+
+# ---------------------------------------------------------------------------
+# info
+
+
+def tet_quality(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    """Radius ratio ``3 r_in / r_circ`` of each tetrahedron: 1 for a regular tet, 0 when degenerate."""
+    p = points[tets]
+    a, b, c, d = p[:, 0], p[:, 1], p[:, 2], p[:, 3]
+    volume = np.abs(np.einsum("ij,ij->i", b - a, np.cross(c - a, d - a))) / 6.0
+    area = sum(
+        0.5 * np.linalg.norm(np.cross(q - o, r - o), axis=1) for o, q, r in ((a, b, c), (a, b, d), (a, c, d), (b, c, d))
+    )
+    # Circumradius from products of opposite edge lengths (Cayley-Menger in closed form).
+    x = np.linalg.norm(a - b, axis=1) * np.linalg.norm(c - d, axis=1)
+    y = np.linalg.norm(a - c, axis=1) * np.linalg.norm(b - d, axis=1)
+    z = np.linalg.norm(a - d, axis=1) * np.linalg.norm(b - c, axis=1)
+    product = np.clip((x + y + z) * (x + y - z) * (x - y + z) * (-x + y + z), 0.0, None)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r_in = 3.0 * volume / area
+        r_circ = np.sqrt(product) / (24.0 * volume)
+        quality = np.where(volume > 0, 3.0 * r_in / r_circ, 0.0)
+    return np.nan_to_num(quality, nan=0.0)
+
+
+def _info(args: argparse.Namespace) -> int:
+    from .io import read_mesh
+
+    mesh = read_mesh(args.mesh, scale=args.scale)
+    lo, hi = mesh.bounds()
+    vol = mesh.volumes
+    quality = tet_quality(mesh.points, mesh.tets)
+    data = {
+        "file": str(args.mesh),
+        "n_nodes": mesh.n_nodes,
+        "n_tets": mesh.n_tets,
+        "n_boundary_faces": int(mesh.boundary_faces().shape[0]),
+        "volume": float(vol.sum()),
+        "bounds_min": lo.tolist(),
+        "bounds_max": hi.tolist(),
+        "min_tet_volume": float(vol.min()),
+        "max_tet_volume": float(vol.max()),
+        "quality_measure": "radius ratio 3 r_in / r_circ (1 = regular)",
+        "min_quality": float(quality.min()),
+        "mean_quality": float(quality.mean()),
+        "bad_tets": int(np.count_nonzero(quality < BAD_QUALITY)),
+        "bad_quality_threshold": BAD_QUALITY,
+        "reoriented_tets": int(mesh.reoriented.size),
+    }
+    if args.json:
+        sys.stdout.write(json.dumps(_jsonable(data), indent=2) + "\n")
+        return EXIT_OK
+    fmt = lambda v: "[" + ", ".join(f"{x:.6g}" for x in v) + "]"  # noqa: E731
+    print(f"{args.mesh}")
+    print(f"  nodes            {mesh.n_nodes}")
+    print(f"  tets             {mesh.n_tets}  ({data['reoriented_tets']} reoriented)")
+    print(f"  boundary faces   {data['n_boundary_faces']}")
+    print(f"  volume           {data['volume']:.6g} m^3")
+    print(f"  bounding box     {fmt(lo)} .. {fmt(hi)} (size {fmt(hi - lo)}) m")
+    print(f"  tet volume       min {data['min_tet_volume']:.4g}, max {data['max_tet_volume']:.4g} m^3")
+    print(f"  quality          radius ratio min {data['min_quality']:.3f}, mean {data['mean_quality']:.3f} (1 = regular)")
+    print(f"  bad tets         {data['bad_tets']} with radius ratio < {BAD_QUALITY}")
+    return EXIT_OK
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,161 @@
+"""Static PNG figures of results, rendered offscreen with matplotlib's Agg canvas.
+
+The figures are drawn on a :class:`matplotlib.figure.Figure` with an Agg canvas rather
+than through ``pyplot``, so importing or calling this module never changes the user's
+matplotlib backend and never opens a window.
+
+Examples
+--------
+>>> import sorofem as sf
+>>> mesh = sf.Mesh.box(size=(1.0, 0.1, 0.1), cells=(8, 2, 2))
+>>> body = sf.Body(mesh, sf.NeoHookean(youngs_modulus=66e3, poisson_ratio=0.45, density=1080))
+>>> body.fix(mesh.nodes_on_plane((0, 0, 0), (1, 0, 0)))
+>>> result = sf.solve_static(body, gravity=(0, 0, -9.81))
+>>> sf.plot.plot_rest_and_deformed(result, "/tmp/shape.png")
+>>> sf.plot.plot_convergence(result.report, "/tmp/convergence.png")
+"""
+
+from __future__ import annotations
+
+import os
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from .model import SolveReport, StaticResult
+
+__all__ = ["plot_rest_and_deformed", "plot_convergence"]
+
+
+def _new_figure(figsize: tuple[float, float]):  # -> Figure
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize, dpi=120)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _boundary_edges(faces: np.ndarray) -> np.ndarray:
+    """Unique undirected edges of a triangle set, ``(e, 2)``."""
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    return np.unique(np.sort(edges, axis=1), axis=0)
+
+
+def _shaded(rgba: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Darken faces turned away from a light above the viewer, so the 3-D shape stays
+    readable where the colour is uniform (done here: matplotlib's own shading varies by version)."""
+    normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+    light = np.array([-0.4, -0.6, 0.7])
+    light /= np.linalg.norm(light)
+    out = rgba.copy()
+    out[:, :3] *= (0.55 + 0.45 * np.abs(normals @ light))[:, None]
+    return out
+
+
+def plot_rest_and_deformed(
+    result: "StaticResult",
+    path: str | os.PathLike[str],
+    title: str | None = None,
+) -> None:
+    """Rest shape (grey wireframe) and deformed surface coloured by ``|u|``, as a PNG.
+
+    Axes share one scale so shapes are not distorted; the colour bar is in metres.
+
+    Parameters
+    ----------
+    result
+        A :class:`~sorofem.StaticResult`.
+    path
+        Output PNG file.
+    title
+        Figure title; default: the maximum displacement.
+    """
+    from matplotlib import cm, colormaps, colors
+    from matplotlib.ticker import MaxNLocator
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
+
+    mesh = result.mesh
+    faces = mesh.boundary_faces()
+    rest = mesh.points
+    deformed = result.positions
+    magnitude = np.linalg.norm(result.displacement, axis=1)
+    face_value = magnitude[faces].mean(axis=1)
+
+    fig = _new_figure((8.0, 6.0))
+    ax = fig.add_subplot(projection="3d")
+
+    edges = _boundary_edges(faces)
+    ax.add_collection3d(Line3DCollection(rest[edges], colors=(0.5, 0.5, 0.5, 0.35), linewidths=0.4))
+
+    vmax = float(magnitude.max()) if magnitude.size and magnitude.max() > 0 else 1.0
+    norm = colors.Normalize(vmin=0.0, vmax=vmax)
+    cmap = colormaps["viridis"]
+    surface = Poly3DCollection(
+        deformed[faces], facecolors=_shaded(cmap(norm(face_value)), deformed[faces]), edgecolors="none"
+    )
+    ax.add_collection3d(surface)
+
+    both = np.vstack([rest, deformed])
+    lo, hi = both.min(axis=0), both.max(axis=0)
+    span = hi - lo
+    # A flat direction would make a zero-height box; give it a sliver of the largest span.
+    span = np.maximum(span, 0.02 * float(span.max() or 1.0))
+    center = 0.5 * (lo + hi)
+    ax.set_xlim(center[0] - span[0] / 2, center[0] + span[0] / 2)
+    ax.set_ylim(center[1] - span[1] / 2, center[1] + span[1] / 2)
+    ax.set_zlim(center[2] - span[2] / 2, center[2] + span[2] / 2)
+    ax.set_box_aspect(tuple(span))
+    for axis, length in zip((ax.xaxis, ax.yaxis, ax.zaxis), span):
+        # Short axes of a slender body get fewer ticks so their labels do not overlap.
+        axis.set_major_locator(MaxNLocator(nbins=4 if length > 0.3 * span.max() else 1))
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_zlabel("z [m]")
+    ax.view_init(elev=20, azim=-60)
+
+    mappable = cm.ScalarMappable(norm=norm, cmap=cmap)
+    mappable.set_array(magnitude)
+    fig.colorbar(mappable, ax=ax, shrink=0.6, pad=0.1, label="displacement magnitude |u| [m]")
+    ax.set_title(title if title is not None else f"rest (grey) and deformed; max |u| = {vmax:.3g} m")
+    fig.savefig(os.fspath(path))
+
+
+def plot_convergence(
+    report: "SolveReport",
+    path: str | os.PathLike[str],
+    tolerance: float | None = None,
+) -> None:
+    """Relative residual against Newton iteration (log scale), as a PNG.
+
+    Parameters
+    ----------
+    report
+        A :class:`~sorofem.SolveReport` (a ``ConvergenceError.report`` works too).
+    path
+        Output PNG file.
+    tolerance
+        If given, drawn as a dashed horizontal line.
+    """
+    residuals = np.asarray(report.residual_history, dtype=np.float64)
+    fig = _new_figure((6.0, 4.0))
+    ax = fig.add_subplot()
+    if residuals.size:
+        # Zeros (exact solves) cannot be shown on a log axis; clip to the smallest double.
+        shown = np.clip(residuals, np.finfo(float).tiny, None)
+        ax.semilogy(np.arange(1, residuals.size + 1), shown, "o-", markersize=4)
+    else:
+        ax.set_yscale("log")
+        ax.text(0.5, 0.5, "no iterations recorded", ha="center", va="center", transform=ax.transAxes)
+    if tolerance is not None:
+        ax.axhline(tolerance, color="grey", linestyle="--", linewidth=1, label=f"tolerance {tolerance:g}")
+        ax.legend()
+    ax.set_xlabel("Newton iteration")
+    ax.set_ylabel("relative residual norm")
+    status = "converged" if report.converged else "not converged"
+    ax.set_title(f"Newton: {status} after {report.iterations} iterations")
+    ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(os.fspath(path))

@@ -1,0 +1,430 @@
+"""Scene files: a whole static simulation described in TOML.
+
+Schema
+------
+::
+
+    [mesh]                     # required: exactly one of `file` or `box`
+    file = "beam.vtu"          # relative to the scene file; .tet or any format meshio reads
+    # box = { size = [1.0, 0.1, 0.1], cells = [8, 2, 2] }   # optional origin = [x, y, z]
+    scale = 1.0                # optional, > 0; coordinates are multiplied by this
+
+    [material]                 # required; Neo-Hookean
+    youngs_modulus = 66e3      # Pa; or shear_modulus + lame_lambda (Pa)
+    poisson_ratio = 0.45       # 0 < nu < 0.5
+    density = 1080             # kg/m^3, optional (default 0)
+
+    [formulation]              # optional
+    kind = "standard"          # the only kind for now
+
+    [[fixed]]                  # required, at least one entry, each selecting >= 1 node
+    box = { min = [-1e-9, -1, -1], max = [1e-9, 1, 1] }   # or nodes = [0, 1, 2]
+    displacement = [0, 0, 0]   # optional prescribed displacement, m
+
+    [loads]                    # optional
+    gravity = [0, 0, -9.81]    # m/s^2
+    forces = [{ nodes = [5, 6], force = [0, 0, -0.1] }]    # optional; N per node;
+                               # `box = {min, max}` may select the nodes instead of `nodes`
+
+    [solver]                   # optional
+    tolerance = 1e-8           # relative residual
+    max_iterations = 50
+    load_steps = 1
+
+Validation is strict: an unknown key, a wrong type, a missing mesh file, a ``[[fixed]]``
+entry selecting no node or an out-of-range value raises :class:`~sorofem.SceneError`
+with the file, the dotted key (e.g. ``fixed[0].box.min``) and, when it can be found, the
+line.
+
+Examples
+--------
+>>> import sorofem as sf
+>>> scene = sf.Scene.load("cantilever.toml")      # doctest: +SKIP
+>>> result = scene.solve()                        # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import InputError, ParameterError, SceneError
+from .io import read_mesh
+from .model import FORMULATIONS, Body, Mesh, NeoHookean, StaticResult, solve_static
+
+__all__ = ["Scene"]
+
+_TOP_KEYS = ("mesh", "material", "formulation", "fixed", "loads", "solver")
+_MATERIAL_KEYS = ("youngs_modulus", "poisson_ratio", "shear_modulus", "lame_lambda", "density")
+_SOLVER_DEFAULTS: dict[str, Any] = {"tolerance": 1e-8, "max_iterations": 50, "load_steps": 1}
+
+_HEADER = re.compile(r"^\s*(\[\[?)\s*([^\]]+?)\s*\]\]?\s*(#.*)?$")
+_KEY_PART = re.compile(r"^([A-Za-z0-9_\-]+)(?:\[(\d+)\])?$")
+
+
+def _type_name(value: Any) -> str:
+    return {
+        bool: "a boolean",
+        int: "an integer",
+        float: "a number",
+        str: "a string",
+        list: "an array",
+        dict: "a table",
+    }.get(type(value), type(value).__name__)
+
+
+class _Checker:
+    """Validates values of one scene file and builds errors that point into it."""
+
+    def __init__(self, path: Path, text: str) -> None:
+        self.path = path
+        self.lines = text.splitlines()
+
+    # -- locating keys ---------------------------------------------------------------
+
+    def find_line(self, key: str) -> int | None:
+        """Best-effort 1-based line of a dotted key such as ``fixed[1].box.min``."""
+        parts = []
+        for token in key.split("."):
+            match = _KEY_PART.match(token)
+            if not match:
+                return None
+            parts.append((match.group(1), None if match.group(2) is None else int(match.group(2))))
+        names = [name for name, _ in parts]
+        # The longest prefix that is a table header opens the section to search in.
+        for depth in range(len(parts), 0, -1):
+            header = ".".join(names[:depth])
+            span = self._section(header, parts[depth - 1][1])
+            if span is not None:
+                return self._find_in(span, names[depth:])
+        # Keys of the root table, or a table written inline at the root.
+        first_header = next((i for i, line in enumerate(self.lines) if _HEADER.match(line)), len(self.lines))
+        return self._find_in((0, first_header), names)
+
+    def _section(self, header: str, index: int | None) -> tuple[int, int] | None:
+        seen = -1
+        for i, line in enumerate(self.lines):
+            match = _HEADER.match(line)
+            if match and re.sub(r"\s+", "", match.group(2)) == header:
+                seen += 1
+                if index is None or seen == index:
+                    end = next(
+                        (j for j in range(i + 1, len(self.lines)) if _HEADER.match(self.lines[j])),
+                        len(self.lines),
+                    )
+                    return i, end
+        return None
+
+    def _find_in(self, span: tuple[int, int], names: list[str]) -> int | None:
+        start, end = span
+        found = start + 1 if start < len(self.lines) and _HEADER.match(self.lines[start]) else None
+        if not names and found is not None:
+            return found
+        for depth, name in enumerate(names):
+            pattern = re.compile(
+                (r"^\s*" if depth == 0 else r"[{,\s]") + re.escape(name) + r"\s*="
+            )
+            hit = next((j for j in range(start, end) if pattern.search(self.lines[j])), None)
+            if hit is None:
+                break
+            found, start = hit + 1, hit
+        return found
+
+    def error(self, key: str | None, message: str) -> SceneError:
+        line = self.find_line(key) if key else None
+        return SceneError(message, path=self.path, key=key, line=line)
+
+    # -- typed getters ---------------------------------------------------------------
+
+    def table(self, value: Any, key: str, hint: str = "") -> dict[str, Any]:
+        if not isinstance(value, dict):
+            raise self.error(key, f"expected a table{hint}, got {_type_name(value)}")
+        return value
+
+    def keys(self, table: dict[str, Any], allowed: tuple[str, ...], prefix: str) -> None:
+        for name in table:
+            if name not in allowed:
+                key = f"{prefix}.{name}" if prefix else name
+                raise self.error(key, f"unknown key '{name}' (allowed: {', '.join(allowed)})")
+
+    def number(self, value: Any, key: str, *, minimum: float | None = None, strict: bool = True) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.error(key, f"expected a number, got {_type_name(value)} {value!r}")
+        value = float(value)
+        if not math.isfinite(value):
+            raise self.error(key, f"expected a finite number, got {value}")
+        if minimum is not None and (value <= minimum if strict else value < minimum):
+            raise self.error(key, f"expected a number {'>' if strict else '>='} {minimum:g}, got {value:g}")
+        return value
+
+    def integer(self, value: Any, key: str, minimum: int) -> int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.error(key, f"expected an integer, got {_type_name(value)} {value!r}")
+        if value < minimum:
+            raise self.error(key, f"expected an integer >= {minimum}, got {value}")
+        return value
+
+    def vec3(self, value: Any, key: str) -> np.ndarray:
+        if not isinstance(value, list) or len(value) != 3:
+            shown = f"an array of length {len(value)}" if isinstance(value, list) else f"{_type_name(value)} {value!r}"
+            raise self.error(key, f"expected an array of 3 numbers, got {shown}")
+        return np.array([self.number(v, key) for v in value])
+
+    def string(self, value: Any, key: str) -> str:
+        if not isinstance(value, str):
+            raise self.error(key, f"expected a string, got {_type_name(value)} {value!r}")
+        return value
+
+
+@dataclass
+class Scene:
+    """A static simulation read from a TOML scene file (schema in the module docstring).
+
+    Attributes
+    ----------
+    path
+        The scene file.
+    mesh, material, body
+        The model, with the ``[[fixed]]`` conditions and ``[loads].forces`` applied to ``body``.
+    formulation
+        ``[formulation].kind``.
+    gravity
+        ``(3,)`` m/s^2.
+    solver
+        Keyword arguments of :func:`sorofem.solve_static`: ``tolerance``,
+        ``max_iterations``, ``load_steps``.
+
+    Examples
+    --------
+    >>> import sorofem as sf
+    >>> scene = sf.Scene.load("cantilever.toml")  # doctest: +SKIP
+    >>> result = scene.solve()                    # doctest: +SKIP
+    """
+
+    path: Path
+    mesh: Mesh
+    material: NeoHookean
+    body: Body
+    formulation: str
+    gravity: np.ndarray
+    solver: dict[str, Any] = field(default_factory=lambda: dict(_SOLVER_DEFAULTS))
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> "Scene":
+        """Read, validate and build a scene.
+
+        Raises
+        ------
+        SceneError
+            Anything wrong in the file, with ``path``, ``key`` and ``line``.
+        FileNotFoundError
+            The scene file itself does not exist.
+        """
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"scene file not found: {path}")
+        try:
+            text = path.read_text(encoding="utf-8")
+        except UnicodeDecodeError as exc:
+            raise SceneError(f"not a UTF-8 text file ({exc})", path=path) from None
+        return cls.from_toml(text, path)
+
+    @classmethod
+    def from_toml(cls, text: str, path: str | os.PathLike[str]) -> "Scene":
+        """Build a scene from TOML text; relative mesh paths are resolved against ``path``'s folder."""
+        path = Path(path)
+        check = _Checker(path, text)
+        try:
+            data = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            match = re.search(r"line (\d+)", str(exc))
+            raise SceneError(
+                f"invalid TOML: {exc}", path=path, line=int(match.group(1)) if match else None
+            ) from None
+        check.keys(data, _TOP_KEYS, "")
+        for required in ("mesh", "material", "fixed"):
+            if required not in data:
+                what = "[[fixed]] entry" if required == "fixed" else f"[{required}] table"
+                raise check.error(required, f"missing: a scene needs a {what}")
+
+        mesh = _build_mesh(check, data["mesh"], path.parent)
+        material = _build_material(check, data["material"])
+        formulation = _build_formulation(check, data.get("formulation", {}))
+        try:
+            body = Body(mesh, material, formulation=formulation)
+        except ParameterError as exc:
+            raise check.error(f"material.{exc.parameter or 'youngs_modulus'}", str(exc)) from None
+        _apply_fixed(check, data["fixed"], body)
+        gravity = _apply_loads(check, data.get("loads", {}), body)
+        solver = _build_solver(check, data.get("solver", {}))
+        return cls(
+            path=path,
+            mesh=mesh,
+            material=material,
+            body=body,
+            formulation=formulation,
+            gravity=gravity,
+            solver=solver,
+        )
+
+    def solve(self) -> StaticResult:
+        """Run :func:`sorofem.solve_static` with the scene's loads and solver options."""
+        return solve_static(self.body, self.gravity, **self.solver)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain summary of the scene's settings."""
+        return {
+            "scene": str(self.path),
+            "mesh": None if self.mesh.source is None else str(self.mesh.source),
+            "formulation": self.formulation,
+            "material": self.material.to_dict(),
+            "gravity": self.gravity.tolist(),
+            "fixed_nodes": int(self.body.fixed_nodes.size),
+            "solver": dict(self.solver),
+        }
+
+
+# ---------------------------------------------------------------------------
+# Sections
+
+
+def _build_mesh(check: _Checker, raw: Any, base: Path) -> Mesh:
+    table = check.table(raw, "mesh")
+    check.keys(table, ("file", "box", "scale"), "mesh")
+    scale = check.number(table["scale"], "mesh.scale", minimum=0.0) if "scale" in table else 1.0
+    if ("file" in table) == ("box" in table):
+        raise check.error("mesh", "expected exactly one of 'file' or 'box'")
+    if "file" in table:
+        name = check.string(table["file"], "mesh.file")
+        file = Path(name) if Path(name).is_absolute() else base / name
+        if not file.is_file():
+            raise check.error("mesh.file", f"mesh file not found: {file}")
+        try:
+            return read_mesh(file, scale=scale)
+        except InputError as exc:
+            raise check.error("mesh.file", f"could not read the mesh: {exc}") from None
+    box = check.table(table["box"], "mesh.box", " like { size = [1, 0.1, 0.1], cells = [8, 2, 2] }")
+    check.keys(box, ("size", "cells", "origin"), "mesh.box")
+    for required in ("size", "cells"):
+        if required not in box:
+            raise check.error(f"mesh.box.{required}", "missing")
+    size = check.vec3(box["size"], "mesh.box.size")
+    if np.any(size <= 0):
+        raise check.error("mesh.box.size", f"expected three positive lengths, got {size.tolist()}")
+    cells = box["cells"]
+    if not isinstance(cells, list) or len(cells) != 3:
+        raise check.error("mesh.box.cells", f"expected an array of 3 integers, got {cells!r}")
+    cells = [check.integer(c, "mesh.box.cells", 1) for c in cells]
+    origin = check.vec3(box["origin"], "mesh.box.origin") if "origin" in box else np.zeros(3)
+    return Mesh.box(size=size * scale, cells=cells, origin=origin * scale)
+
+
+def _build_material(check: _Checker, raw: Any) -> NeoHookean:
+    table = check.table(raw, "material")
+    check.keys(table, _MATERIAL_KEYS, "material")
+    values = {name: check.number(value, f"material.{name}") for name, value in table.items()}
+    try:
+        return NeoHookean(**values)
+    except ParameterError as exc:
+        name = exc.parameter if exc.parameter in _MATERIAL_KEYS else next(iter(values), "youngs_modulus")
+        raise check.error(f"material.{name}", str(exc).removeprefix(f"{name}: ")) from None
+
+
+def _build_formulation(check: _Checker, raw: Any) -> str:
+    table = check.table(raw, "formulation")
+    check.keys(table, ("kind",), "formulation")
+    kind = check.string(table.get("kind", "standard"), "formulation.kind")
+    if kind not in FORMULATIONS:
+        raise check.error(
+            "formulation.kind", f"expected one of {', '.join(repr(f) for f in FORMULATIONS)}, got {kind!r}"
+        )
+    return kind
+
+
+def _select_nodes(check: _Checker, entry: dict[str, Any], prefix: str, mesh: Mesh) -> np.ndarray:
+    """Nodes chosen by exactly one of `nodes = [...]` or `box = {min, max}`."""
+    if ("nodes" in entry) == ("box" in entry):
+        raise check.error(prefix, "expected exactly one of 'nodes' or 'box'")
+    if "nodes" in entry:
+        raw = entry["nodes"]
+        if not isinstance(raw, list):
+            raise check.error(f"{prefix}.nodes", f"expected an array of node indices, got {_type_name(raw)}")
+        nodes = np.array([check.integer(n, f"{prefix}.nodes", 0) for n in raw], dtype=np.int64)
+        if nodes.size and nodes.max() >= mesh.n_nodes:
+            raise check.error(
+                f"{prefix}.nodes",
+                f"node index {int(nodes.max())} out of range: the mesh has {mesh.n_nodes} nodes (0..{mesh.n_nodes - 1})",
+            )
+        key = f"{prefix}.nodes"
+    else:
+        box = check.table(entry["box"], f"{prefix}.box", " like { min = [x, y, z], max = [x, y, z] }")
+        check.keys(box, ("min", "max"), f"{prefix}.box")
+        for required in ("min", "max"):
+            if required not in box:
+                raise check.error(f"{prefix}.box.{required}", "missing")
+        lo = check.vec3(box["min"], f"{prefix}.box.min")
+        hi = check.vec3(box["max"], f"{prefix}.box.max")
+        if np.any(lo > hi):
+            raise check.error(f"{prefix}.box", f"expected min <= max, got min {lo.tolist()}, max {hi.tolist()}")
+        nodes = mesh.nodes_in_box(lo, hi)
+        key = f"{prefix}.box"
+    if nodes.size == 0:
+        lo_b, hi_b = mesh.bounds()
+        raise check.error(
+            key,
+            f"selects no nodes (the mesh spans {np.round(lo_b, 6).tolist()} .. {np.round(hi_b, 6).tolist()})",
+        )
+    return nodes
+
+
+def _apply_fixed(check: _Checker, raw: Any, body: Body) -> None:
+    if isinstance(raw, dict):
+        raise check.error("fixed", "expected an array of tables: write [[fixed]], not [fixed]")
+    if not isinstance(raw, list):
+        raise check.error("fixed", f"expected an array of tables ([[fixed]]), got {_type_name(raw)}")
+    if not raw:
+        raise check.error("fixed", "at least one [[fixed]] entry is required: an unsupported body has no equilibrium")
+    for i, entry in enumerate(raw):
+        prefix = f"fixed[{i}]"
+        entry = check.table(entry, prefix)
+        check.keys(entry, ("nodes", "box", "displacement"), prefix)
+        nodes = _select_nodes(check, entry, prefix, body.mesh)
+        disp = check.vec3(entry["displacement"], f"{prefix}.displacement") if "displacement" in entry else None
+        body.fix(nodes, disp)
+
+
+def _apply_loads(check: _Checker, raw: Any, body: Body) -> np.ndarray:
+    table = check.table(raw, "loads")
+    check.keys(table, ("gravity", "forces"), "loads")
+    gravity = check.vec3(table["gravity"], "loads.gravity") if "gravity" in table else np.zeros(3)
+    forces = table.get("forces", [])
+    if not isinstance(forces, list):
+        raise check.error("loads.forces", f"expected an array of tables, got {_type_name(forces)}")
+    for i, entry in enumerate(forces):
+        prefix = f"loads.forces[{i}]"
+        entry = check.table(entry, prefix, " like { nodes = [..], force = [fx, fy, fz] }")
+        check.keys(entry, ("nodes", "box", "force"), prefix)
+        if "force" not in entry:
+            raise check.error(f"{prefix}.force", "missing")
+        nodes = _select_nodes(check, entry, prefix, body.mesh)
+        body.add_force(nodes, check.vec3(entry["force"], f"{prefix}.force"))
+    return gravity
+
+
+def _build_solver(check: _Checker, raw: Any) -> dict[str, Any]:
+    table = check.table(raw, "solver")
+    check.keys(table, tuple(_SOLVER_DEFAULTS), "solver")
+    options = dict(_SOLVER_DEFAULTS)
+    if "tolerance" in table:
+        options["tolerance"] = check.number(table["tolerance"], "solver.tolerance", minimum=0.0)
+    for name in ("max_iterations", "load_steps"):
+        if name in table:
+            options[name] = check.integer(table[name], f"solver.{name}", 1)
+    return options
