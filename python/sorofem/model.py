@@ -44,6 +44,8 @@ else:
 
 __all__ = [
     "FORMULATIONS",
+    "VOLUMETRIC_MEASURES",
+    "PRESSURE_MASSES",
     "Mesh",
     "NeoHookean",
     "Body",
@@ -52,8 +54,12 @@ __all__ = [
     "solve_static",
 ]
 
-#: Formulations the solver accepts. Adding "mixed" (displacement-pressure) is this one line.
-FORMULATIONS: tuple[str, ...] = ("standard",)
+#: Formulations the solver accepts: displacement only, or displacement + nodal pressure.
+FORMULATIONS: tuple[str, ...] = ("standard", "mixed")
+#: Volumetric measures ``c(J)`` of the energy ``lambda/2 c(J)^2``: ``ln J`` or ``J - 1``.
+VOLUMETRIC_MEASURES: tuple[str, ...] = ("log", "linear")
+#: Pressure mass matrices of the mixed formulation.
+PRESSURE_MASSES: tuple[str, ...] = ("consistent", "lumped")
 
 _ORIENTATIONS = ("reorient", "reject")
 
@@ -443,7 +449,9 @@ class NeoHookean:
 
     Strain energy per unit rest volume (``I1 = tr(F^T F)``, ``J = det F``)::
 
-        W = mu/2 (I1 - 3) - mu ln J + lambda/2 (ln J)^2
+        W = mu/2 (I1 - 3) - mu ln J + lambda/2 c(J)^2
+
+    with ``c(J) = ln J`` (default) or ``J - 1``, chosen per body (``Body(volumetric=...)``).
 
     Give exactly one of the pairs (``youngs_modulus``, ``poisson_ratio``) or
     (``shear_modulus``, ``lame_lambda``). Each value is a scalar or a per-element
@@ -456,7 +464,8 @@ class NeoHookean:
         E in Pa, > 0.
     poisson_ratio
         nu, with 0 <= nu < 0.5: lambda = E nu / ((1 + nu)(1 - 2 nu)) must be finite and
-        >= 0 (> 0 in the mixed formulation, which divides by it).
+        >= 0 (> 0 in the mixed formulation, which divides by it). Nearly incompressible
+        silicone: nu = 0.499 or 0.4999 with ``Body(..., formulation="mixed")``.
     shear_modulus
         mu = E / (2 (1 + nu)) in Pa, > 0.
     lame_lambda
@@ -508,8 +517,10 @@ class NeoHookean:
             _check(
                 np.less(nu, 0.5),
                 "poisson_ratio",
-                "expected < 0.5 (the standard formulation needs nu < 0.5; nearly incompressible "
-                "materials need nu slightly below it)",
+                "expected nu < 0.5 (nu = 0.5 means lame_lambda = inf; both formulations need a "
+                "finite lambda, the mixed one because its P1-P1 pressure modes are controlled only "
+                "by the compliance M_p / lambda; model silicone with e.g. nu = 0.4999 and "
+                "formulation='mixed')",
                 nu,
             )
             _check(
@@ -638,7 +649,27 @@ class Body:
     material
         A :class:`NeoHookean` (scalar or per-element parameters).
     formulation
-        ``"standard"`` (displacement only). See :data:`FORMULATIONS`.
+        ``"standard"``: displacement-only linear tetrahedra; they lock (come out far too
+        stiff) as nu -> 0.5. ``"mixed"``: linear displacement plus a continuous linear nodal
+        pressure ``p`` (Pa), a perturbed-Lagrangian saddle point that does not lock; the
+        volumetric energy ``lambda/2 c(J)^2`` becomes ``p c(J) - p^2 / (2 lambda)``, so
+        ``p ~ lambda c(J)`` is positive in tension. See :data:`FORMULATIONS`.
+    volumetric
+        ``"log"`` (default): ``c(J) = ln J``; ``"linear"``: ``c(J) = J - 1``, which makes the
+        nearly incompressible limit preserve volume (rather than mean ``ln J``) exactly.
+        Used by both formulations.
+    pressure_mass
+        Mixed only (ignored by ``"standard"``): the pressure mass matrix ``M_p`` of the
+        compliance ``C = M_p / lambda``, ``"consistent"`` (default, exact P1) or
+        ``"lumped"`` (diagonal).
+
+    Raises
+    ------
+    InputError
+        Unknown formulation, volumetric measure or pressure mass.
+    ParameterError
+        ``formulation="mixed"`` with ``lame_lambda = 0`` (``poisson_ratio = 0``) anywhere:
+        the mixed form divides by lambda.
 
     Examples
     --------
@@ -649,20 +680,52 @@ class Body:
     >>> body.add_force(mesh.nodes_on_plane((1, 0, 0), (1, 0, 0)), (0, 0, -0.01))
     >>> body.fixed_nodes.size
     9
+
+    Nearly incompressible silicone, without locking:
+
+    >>> silicone = sf.NeoHookean(youngs_modulus=66e3, poisson_ratio=0.4999, density=1080)
+    >>> body = sf.Body(mesh, silicone, formulation="mixed", volumetric="log", pressure_mass="consistent")
+    >>> body.fix(mesh.nodes_on_plane((0, 0, 0), (1, 0, 0)))
+    >>> result = sf.solve_static(body, gravity=(0, 0, -9.81))
+    >>> result.pressure.shape, abs(result.mean_log_j) < 1e-4
+    ((81,), True)
     """
 
-    def __init__(self, mesh: Mesh, material: NeoHookean, formulation: str = "standard") -> None:
+    def __init__(
+        self,
+        mesh: Mesh,
+        material: NeoHookean,
+        formulation: str = "standard",
+        *,
+        volumetric: str = "log",
+        pressure_mass: str = "consistent",
+    ) -> None:
         if not isinstance(mesh, Mesh):
             raise InputError(f"mesh: expected a sorofem.Mesh, got {_describe(mesh)}")
         if not isinstance(material, NeoHookean):
             raise InputError(f"material: expected a sorofem.NeoHookean, got {_describe(material)}")
-        if formulation not in FORMULATIONS:
-            raise InputError(f"formulation: expected one of {list(FORMULATIONS)}, got {formulation!r}")
+        for name, value, allowed in (
+            ("formulation", formulation, FORMULATIONS),
+            ("volumetric", volumetric, VOLUMETRIC_MEASURES),
+            ("pressure_mass", pressure_mass, PRESSURE_MASSES),
+        ):
+            if not isinstance(value, str) or value not in allowed:
+                raise InputError(f"{name}: expected one of {list(allowed)}, got {value!r}")
         # Fail now rather than at solve time if per-element arrays do not fit the mesh.
-        material.per_element(mesh.n_tets)
+        _, lam, _ = material.per_element(mesh.n_tets)
+        if formulation == "mixed" and not np.all(lam > 0):
+            name = "lame_lambda" if material._given == "lame" else "poisson_ratio"
+            raise ParameterError(
+                f"{name}: formulation='mixed' needs lame_lambda > 0 (poisson_ratio > 0), got "
+                f"lame_lambda = {float(lam[~(lam > 0)][0])} Pa; it divides by lambda (compliance "
+                "C = M_p / lambda). Use formulation='standard' for nu = 0",
+                name,
+            )
         self.mesh = mesh
         self.material = material
         self.formulation = formulation
+        self.volumetric = volumetric
+        self.pressure_mass = pressure_mass
         self._fixed = np.zeros(0, dtype=np.int64)
         self._prescribed = np.zeros((0, 3), dtype=np.float64)
         self._forces = np.zeros((mesh.n_nodes, 3), dtype=np.float64)
@@ -723,20 +786,30 @@ class Body:
         """Accumulated nodal forces, ``(n_nodes, 3)``, N."""
         return self._forces.copy()
 
+    @property
+    def formulation_options(self) -> dict[str, str]:
+        """The options that apply to :attr:`formulation`: ``volumetric``, and
+        ``pressure_mass`` when mixed."""
+        options = {"volumetric": self.volumetric}
+        if self.formulation == "mixed":
+            options["pressure_mass"] = self.pressure_mass
+        return options
+
     def _core_model(self) -> Any:
         """The extension's Model, rebuilt only when the fixed set changes: building it
         analyses the sparsity pattern, which is worth reusing across solves."""
         if self._model is None or not np.array_equal(self._model_fixed, self._fixed):
             core = _core_module()
             self._model = core.Model(
-                self.mesh.points, self.mesh.tets, self._fixed.copy(), self.formulation, {}
+                self.mesh.points, self.mesh.tets, self._fixed.copy(), self.formulation, self.formulation_options
             )
             self._model_fixed = self._fixed.copy()
         return self._model
 
     def __repr__(self) -> str:
+        options = "".join(f", {k}={v!r}" for k, v in self.formulation_options.items())
         return (
-            f"Body({self.mesh!r}, {self.material!r}, formulation={self.formulation!r}, "
+            f"Body({self.mesh!r}, {self.material!r}, formulation={self.formulation!r}{options}, "
             f"fixed={self._fixed.size} nodes)"
         )
 
@@ -845,8 +918,13 @@ class StaticResult:
         ``positions - mesh.points``, ``(n_nodes, 3)``, m.
     pressure
         Nodal pressure ``(n_nodes,)`` in Pa for mixed formulations, ``None`` for ``"standard"``.
+        It is the multiplier of the volume constraint, ``p ~ lambda c(J)``: positive where
+        the material is stretched in volume (the mean Cauchy stress is ``p / J``).
     report
         The :class:`SolveReport`.
+
+    Volume bookkeeping (both formulations): :attr:`J` per tetrahedron,
+    :attr:`deformed_volumes`, :attr:`volume_change` and :attr:`mean_log_j`.
     """
 
     def __init__(
@@ -855,8 +933,12 @@ class StaticResult:
         positions: NDArray[np.float64],
         pressure: NDArray[np.float64] | None,
         report: SolveReport,
+        reactions: NDArray[np.float64] | None = None,
     ) -> None:
         self.body = body
+        #: Support reactions ``(n_fixed, 3)`` in N, one row per entry of ``body.fixed_nodes``:
+        #: the force each support exerts on the body (they balance the applied loads).
+        self.reactions = None if reactions is None else np.asarray(reactions, dtype=np.float64)
         self.mesh = body.mesh
         self.positions = np.asarray(positions, dtype=np.float64)
         self.displacement = self.positions - self.mesh.points
@@ -884,6 +966,28 @@ class StaticResult:
         """Von Mises equivalent of the Cauchy stress per tetrahedron, ``(n_tets,)``, Pa."""
         return self._element_fields()["von_mises"]
 
+    @cached_property
+    def deformed_volumes(self) -> NDArray[np.float64]:
+        """Signed volume of each deformed tetrahedron, ``(n_tets,)``, m^3 (from the positions)."""
+        x = self.positions[self.mesh.tets]
+        edges = x[:, 1:] - x[:, :1]
+        return np.einsum("ij,ij->i", edges[:, 0], np.cross(edges[:, 1], edges[:, 2])) / 6.0
+
+    @property
+    def volume_change(self) -> float:
+        """Relative change of the total volume, ``(V_deformed - V_rest) / V_rest``."""
+        rest = self.mesh.volumes
+        return float((self.deformed_volumes - rest).sum() / rest.sum())
+
+    @property
+    def mean_log_j(self) -> float:
+        """Volume-weighted mean of ``ln J``, ``sum_e V_e ln J_e / V`` (rest volumes): the
+        quantity the ``"log"`` volumetric measure keeps near 0 as nu -> 0.5."""
+        rest = self.mesh.volumes
+        with np.errstate(divide="ignore", invalid="ignore"):
+            log_j = np.log(self.deformed_volumes / rest)
+        return float((rest * log_j).sum() / rest.sum())
+
     @property
     def max_displacement(self) -> float:
         """Largest nodal displacement magnitude, m."""
@@ -900,8 +1004,14 @@ class StaticResult:
             "n_nodes": self.mesh.n_nodes,
             "n_tets": self.mesh.n_tets,
             "formulation": self.body.formulation,
+            "formulation_options": self.body.formulation_options,
             "material": self.body.material.to_dict(),
             "min_J": float(self.J.min()),
+            "max_J": float(self.J.max()),
+            "volume_change": self.volume_change,
+            "mean_log_j": self.mean_log_j,
+            "min_pressure": None if self.pressure is None else float(self.pressure.min()),
+            "max_pressure": None if self.pressure is None else float(self.pressure.max()),
             "max_von_mises": float(self.von_mises.max()),
             "report": self.report.to_dict(),
         }
@@ -982,4 +1092,4 @@ def solve_static(
             err.report = SolveReport.from_dict(err.report)
         raise
     report = SolveReport.from_dict(out)
-    return StaticResult(body, out["positions"], out.get("pressure"), report)
+    return StaticResult(body, out["positions"], out.get("pressure"), report, reactions=out.get("reactions"))

@@ -253,12 +253,11 @@ impl Assembler {
         energy
     }
 
-    /// The full-length vector `-grad` of linear terms: the external forces (N) they apply.
-    pub fn load_vector(&self, terms: &[&dyn Term]) -> Vec<f64> {
-        let mut f = vec![0.0; self.n_full];
-        let zero = vec![0.0; self.n_full];
+    /// Gradient of `terms` with respect to every full DOF, fixed ones included (N): the internal
+    /// forces, from which reactions at supports follow. Serial; meant for post-processing.
+    pub fn full_gradient(&self, terms: &[&dyn Term], z: &[f64]) -> Vec<f64> {
+        let mut out = vec![0.0; self.n_full];
         for term in terms {
-            debug_assert!(term.is_linear());
             let s = term.stencil_size();
             let mut dofs = vec![0usize; s];
             let mut local = vec![0.0; s];
@@ -266,14 +265,20 @@ impl Assembler {
             for e in 0..term.n_elements() {
                 term.element_dofs(e, &mut dofs);
                 for (v, &d) in local.iter_mut().zip(&dofs) {
-                    *v = zero[d];
+                    *v = z[d];
                 }
                 term.element(e, &local, Some(&mut grad), None, HessianMode::Exact);
                 for (g, &d) in grad.iter().zip(&dofs) {
-                    f[d] -= g;
+                    out[d] += g;
                 }
             }
         }
-        f
+        out
+    }
+
+    /// The external forces (N, full DOFs) of linear terms: minus their gradient.
+    pub fn load_vector(&self, terms: &[&dyn Term]) -> Vec<f64> {
+        debug_assert!(terms.iter().all(|t| t.is_linear()));
+        self.full_gradient(terms, &vec![0.0; self.n_full]).into_iter().map(|g| -g).collect()
     }
 }

@@ -41,11 +41,13 @@ pub struct Loads {
 
 pub type SolveOptions = NewtonOptions;
 
-/// An equilibrium: positions (m, 3 n node-major), nodal pressures (Pa, mixed only) and the report.
+/// An equilibrium: positions (m, 3 n node-major), nodal pressures (Pa, mixed only), the
+/// reaction force (N) at each fixed node (in the order they were given) and the report.
 #[derive(Clone, Debug)]
 pub struct Solution {
     pub positions: Vec<f64>,
     pub pressure: Option<Vec<f64>>,
+    pub reactions: Vec<[f64; 3]>,
     pub report: SolveReport,
 }
 
@@ -315,6 +317,15 @@ impl Model {
         // Only the prescribed displacements are scaled by the load factor: the initial guess is
         // kept as given for the free DOFs, which is what warm starts need.
         let report = newton::solve(&mut problem, &mut z, options)?;
+        let full_load = std::mem::take(&mut problem.full_load);
+        // Reaction = internal force minus applied load at the supports, so that the reactions
+        // balance the loads: sum(reactions) + sum(loads) = 0 at equilibrium.
+        let internal = self.assembler.full_gradient(&[&self.elastic], &z);
+        let reactions = self
+            .fixed_nodes
+            .iter()
+            .map(|&i| std::array::from_fn(|k| internal[3 * i + k] - full_load[3 * i + k]))
+            .collect();
         let pressure =
             matches!(self.formulation, Formulation::Mixed { .. }).then(|| z[3 * n..].to_vec());
         self.last_pressure.clone_from(&pressure);
@@ -325,6 +336,7 @@ impl Model {
         Ok(Solution {
             positions: z,
             pressure,
+            reactions,
             report,
         })
     }
@@ -529,7 +541,22 @@ impl NewtonProblem for System<'_> {
         self.model.factor.solve_in_place(&mut d);
         timings.solve += t0.elapsed().as_secs_f64();
         if self.is_mixed() {
-            return Ok(d.iter().all(|v| v.is_finite()).then_some(d));
+            if !d.iter().all(|v| v.is_finite()) {
+                return Ok(None);
+            }
+            // Curvature of the condensed energy W_mu + 1/2 phi^T C^-1 phi along the step:
+            // du^T H_c du = du^T A du + dp^T C dp (with dp = C^-1 G du at a converged constraint).
+            // A non-positive value means A is indefinite enough to head for a saddle, not a
+            // minimum: take the projected Hessian instead.
+            let n_displacement = d.len() - self.n_nodes();
+            let (mut du, mut dp) = (d.clone(), d.clone());
+            du[n_displacement..].fill(0.0);
+            dp[..n_displacement].fill(0.0);
+            let quadratic = |v: &[f64]| -> f64 {
+                pattern.symmetric_matvec(&eval.hessian, v).iter().zip(v).map(|(a, b)| a * b).sum()
+            };
+            let curvature = quadratic(&du) - quadratic(&dp);
+            return Ok((curvature > 0.0).then_some(d));
         }
         let slope: f64 = d.iter().zip(g).map(|(a, b)| a * b).sum();
         Ok((slope < 0.0).then_some(d))
