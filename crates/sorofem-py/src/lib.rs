@@ -207,7 +207,8 @@ impl Model {
         py.detach(|| inner.set_material(&material)).py(py)
     }
 
-    /// Static equilibrium; returns a dict with "positions", "pressure" and the report entries.
+    /// Static equilibrium; returns a dict with "positions", "pressure", "reactions" (one row per
+    /// fixed node, N) and the report entries.
     #[pyo3(signature = (gravity, forces, prescribed, initial = None, tolerance = 1e-8, max_iterations = 50, load_steps = 1))]
     #[allow(clippy::too_many_arguments)]
     fn solve<'py>(
@@ -266,6 +267,7 @@ impl Model {
             "positions",
             convert::points_to_numpy(py, &solution.positions),
         )?;
+        out.set_item("reactions", convert::points_to_numpy(py, solution.reactions.as_flattened()))?;
         match solution.pressure {
             Some(p) => out.set_item("pressure", PyArray1::from_vec(py, p))?,
             None => out.set_item("pressure", py.None())?,
