@@ -279,6 +279,9 @@ impl Assembler {
     /// The external forces (N, full DOFs) of linear terms: minus their gradient.
     pub fn load_vector(&self, terms: &[&dyn Term]) -> Vec<f64> {
         debug_assert!(terms.iter().all(|t| t.is_linear()));
-        self.full_gradient(terms, &vec![0.0; self.n_full]).into_iter().map(|g| -g).collect()
+        self.full_gradient(terms, &vec![0.0; self.n_full])
+            .into_iter()
+            .map(|g| -g)
+            .collect()
     }
 }

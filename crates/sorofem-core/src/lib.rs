@@ -11,9 +11,11 @@
 //! (a body ready to be solved many times).
 
 pub mod assembly;
+pub mod cables;
 pub mod energy;
 pub mod error;
 pub mod linear;
+pub mod locate;
 pub mod material;
 pub mod mesh;
 pub mod model;

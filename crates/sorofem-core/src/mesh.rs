@@ -142,7 +142,8 @@ impl TetMesh {
     }
 
     /// A box `[origin, origin + size]` of `cells[0] x cells[1] x cells[2]` hexahedra, each split into
-    /// six tetrahedra around its main diagonal (Kuhn subdivision: conforming across faces).
+    /// six tetrahedra around one of its diagonals (Kuhn subdivision), mirrored from hex to hex so
+    /// that the split is conforming and symmetric (the paper's `box2.tet` pattern).
     ///
     /// Node `(i, j, k)` has index `i + (nx + 1) (j + (ny + 1) k)`. The 8x2x2 box has 81 nodes and 192 tets.
     pub fn box_mesh(size: [f64; 3], cells: [usize; 3], origin: [f64; 3]) -> Result<Self> {
@@ -189,11 +190,19 @@ impl TetMesh {
         for k in 0..nz {
             for j in 0..ny {
                 for i in 0..nx {
+                    // Mirror every other hex so that neighbouring diagonals alternate: the mesh is
+                    // then symmetric about the box's mid-planes (no spurious twist of a beam under
+                    // symmetric loads) and identical to the paper's box2.tet.
+                    let flip = [i % 2, 1 - j % 2, k % 2];
                     for perm in PERMUTATIONS {
-                        let mut corner = [i, j, k];
-                        let mut tet = [node(i, j, k); 4];
+                        let mut corner = [i + flip[0], j + flip[1], k + flip[2]];
+                        let mut tet = [node(corner[0], corner[1], corner[2]); 4];
                         for (step, &axis) in perm.iter().enumerate() {
-                            corner[axis] += 1;
+                            corner[axis] = if flip[axis] == 1 {
+                                corner[axis] - 1
+                            } else {
+                                corner[axis] + 1
+                            };
                             tet[step + 1] = node(corner[0], corner[1], corner[2]);
                         }
                         tets.push(tet);

@@ -2,8 +2,9 @@
 //! pattern and the symbolic factorisation (built once), and the material (changeable).
 
 use crate::assembly::Assembler;
+use crate::cables::{embed, CableSpec, PointPlacement};
 use crate::energy::elastic::PressureCompliance;
-use crate::energy::{ElasticTerm, GravityTerm, HessianMode, NodalForceTerm};
+use crate::energy::{CableTerm, ElasticTerm, GravityTerm, HessianMode, NodalForceTerm, Term};
 pub use crate::energy::{Formulation as ElementFormulation, PressureMass};
 use crate::error::{check_finite, Error, Result};
 use crate::linear::SparseFactor;
@@ -42,12 +43,15 @@ pub struct Loads {
 pub type SolveOptions = NewtonOptions;
 
 /// An equilibrium: positions (m, 3 n node-major), nodal pressures (Pa, mixed only), the
-/// reaction force (N) at each fixed node (in the order they were given) and the report.
+/// reaction force (N) at each fixed node (in the order they were given), the position (m) of
+/// every cable point and the tension (N) of every cable segment, and the report.
 #[derive(Clone, Debug)]
 pub struct Solution {
     pub positions: Vec<f64>,
     pub pressure: Option<Vec<f64>>,
     pub reactions: Vec<[f64; 3]>,
+    pub cable_points: Vec<Vec<[f64; 3]>>,
+    pub cable_tensions: Vec<Vec<f64>>,
     pub report: SolveReport,
 }
 
@@ -56,14 +60,18 @@ pub struct Model {
     fixed_nodes: Vec<usize>,
     formulation: Formulation,
     elastic: ElasticTerm,
+    cables: CableTerm,
+    placements: Vec<Vec<PointPlacement>>,
+    /// Rest position (m) and mass (kg) of each free cable node.
+    free_nodes: Vec<([f64; 3], f64)>,
     density: Vec<f64>,
     assembler: Assembler,
     factor: SparseFactor,
     /// Weight (Pa/m) of the volume-constraint residual rows (m^3) in the mixed residual norm,
     /// so that they are measured in N like the force rows: `mean(mu) / mean edge length`.
     pressure_weight: f64,
-    /// Nodal pressures of the last mixed solve, the starting guess of the next one.
-    last_pressure: Option<Vec<f64>>,
+    /// Free-node displacements and pressures of the last solve: a warm start's starting guess.
+    last_extra: Option<Vec<f64>>,
     material_set: bool,
 }
 
@@ -74,6 +82,18 @@ impl Model {
         fixed_nodes: &[i64],
         formulation: Formulation,
         volumetric: Volumetric,
+    ) -> Result<Self> {
+        Self::try_new_with_cables(mesh, fixed_nodes, formulation, volumetric, &[])
+    }
+
+    /// [`Model::try_new`] with cables. Full DOFs: `3 n` node displacements, then `3 m` free cable
+    /// node displacements, then (mixed) `n` nodal pressures.
+    pub fn try_new_with_cables(
+        mesh: Arc<TetMesh>,
+        fixed_nodes: &[i64],
+        formulation: Formulation,
+        volumetric: Volumetric,
+        cables: &[CableSpec],
     ) -> Result<Self> {
         let n = mesh.n_nodes();
         let mut fixed_set = vec![false; n];
@@ -98,10 +118,12 @@ impl Model {
             fixed.push(node as usize);
         }
         let n_tets = mesh.n_tets();
+        let embedded = embed(&mesh, cables)?;
+        let n_displacement = 3 * n + 3 * embedded.free_nodes.len();
         let element_formulation = match formulation {
             Formulation::Standard => ElementFormulation::Standard,
             Formulation::Mixed { mass } => ElementFormulation::Mixed {
-                pressure_offset: 3 * n,
+                pressure_offset: n_displacement,
                 mass,
             },
         };
@@ -113,14 +135,15 @@ impl Model {
             formulation: element_formulation,
         };
         let n_full = match formulation {
-            Formulation::Standard => 3 * n,
-            Formulation::Mixed { .. } => 4 * n,
+            Formulation::Standard => n_displacement,
+            Formulation::Mixed { .. } => n_displacement + n,
         };
+        let cable_term = CableTerm::new(embedded.cables);
         let mut fixed_dofs = vec![false; n_full];
         for &node in &fixed {
             fixed_dofs[3 * node..3 * node + 3].fill(true);
         }
-        let assembler = Assembler::new(&fixed_dofs, &[&elastic]);
+        let assembler = Assembler::new(&fixed_dofs, &[&elastic, &cable_term]);
         let factor = match formulation {
             Formulation::Standard => SparseFactor::analyse(assembler.pattern())?,
             Formulation::Mixed { mass } => {
@@ -131,7 +154,7 @@ impl Model {
                 // The pressure unknowns live on the nodes, so this pattern is the node graph.
                 let node_graph = Assembler::new(&vec![false; n], &[&compliance]);
                 let node_order = crate::linear::amd_order(node_graph.pattern())?;
-                let order = saddle_point_order(&assembler, &node_order, &fixed_set);
+                let order = saddle_point_order(&assembler, &node_order, &fixed_set, n_displacement);
                 SparseFactor::analyse_with_order(assembler.pattern(), &order)?
             }
         };
@@ -140,11 +163,14 @@ impl Model {
             fixed_nodes: fixed,
             formulation,
             elastic,
+            cables: cable_term,
+            placements: embedded.placements,
+            free_nodes: embedded.free_nodes,
             density: vec![0.0; n_tets],
             assembler,
             factor,
             pressure_weight: 1.0,
-            last_pressure: None,
+            last_extra: None,
             material_set: false,
         })
     }
@@ -164,6 +190,68 @@ impl Model {
     /// Number of Newton unknowns (free displacement DOFs plus pressures).
     pub fn n_free(&self) -> usize {
         self.assembler.n_free()
+    }
+
+    /// Where each cable point was placed (embedded, snapped, free node or anchor).
+    pub fn cable_placements(&self) -> &[Vec<PointPlacement>] {
+        &self.placements
+    }
+
+    pub fn n_cables(&self) -> usize {
+        self.cables.cables.len()
+    }
+
+    /// Sets cable `cable`'s actuation alpha (> 0; 1 = rest length, < 1 = pulled).
+    pub fn set_actuation(&mut self, cable: usize, actuation: f64) -> Result<()> {
+        let n_cables = self.n_cables();
+        let target = self
+            .cables
+            .cables
+            .get_mut(cable)
+            .ok_or_else(|| Error::IndexOutOfRange {
+                param: "cable".into(),
+                position: 0,
+                index: cable as i64,
+                len: n_cables,
+            })?;
+        if !(actuation > 0.0 && actuation.is_finite()) {
+            return Err(Error::invalid(
+                "actuation",
+                "alpha > 0 (1 = rest, < 1 = pulled)",
+                actuation,
+            ));
+        }
+        target.actuation = actuation;
+        Ok(())
+    }
+
+    /// Sets cable `cable`'s segment stiffness (N/m, > 0).
+    pub fn set_cable_stiffness(&mut self, cable: usize, stiffness: f64) -> Result<()> {
+        let n_cables = self.n_cables();
+        let target = self
+            .cables
+            .cables
+            .get_mut(cable)
+            .ok_or_else(|| Error::IndexOutOfRange {
+                param: "cable".into(),
+                position: 0,
+                index: cable as i64,
+                len: n_cables,
+            })?;
+        if !(stiffness > 0.0 && stiffness.is_finite()) {
+            return Err(Error::invalid(
+                "stiffness",
+                "a finite stiffness > 0 N/m",
+                stiffness,
+            ));
+        }
+        target.stiffness = stiffness;
+        Ok(())
+    }
+
+    /// The terms whose sum is the internal energy, in the assembler's order.
+    fn terms(&self) -> [&dyn Term; 2] {
+        [&self.elastic, &self.cables]
     }
 
     /// Sets per-tet parameters. Requires `mu > 0`, `0 <= lambda < inf` (`> 0` when mixed), `density >= 0`.
@@ -285,9 +373,9 @@ impl Model {
                 for (zi, (xi, ri)) in z.iter_mut().zip(x.iter().zip(self.mesh.rest_flat())) {
                     *zi = xi - ri;
                 }
-                // A warm start continues from the last equilibrium, pressures included.
-                if let Some(p) = &self.last_pressure {
-                    z[3 * n..].copy_from_slice(p);
+                // A warm start continues from the last equilibrium, free nodes and pressures included.
+                if let Some(extra) = &self.last_extra {
+                    z[3 * n..].copy_from_slice(extra);
                 }
             }
             None => {}
@@ -297,9 +385,21 @@ impl Model {
             density: self.density.clone(),
             gravity: loads.gravity,
         };
+        // Free cable node i is DOF block n + i; its weight is a point force.
+        let free_node_weights = self
+            .free_nodes
+            .iter()
+            .enumerate()
+            .map(|(i, &(_, mass))| (n + i, loads.gravity.map(|g| mass * g)));
+        let point_forces: Vec<(usize, [f64; 3])> = loads
+            .nodal_forces
+            .iter()
+            .copied()
+            .chain(free_node_weights)
+            .collect();
         let forces = NodalForceTerm {
-            nodes: loads.nodal_forces.iter().map(|f| f.0).collect(),
-            forces: loads.nodal_forces.iter().map(|f| f.1).collect(),
+            nodes: point_forces.iter().map(|f| f.0).collect(),
+            forces: point_forces.iter().map(|f| f.1).collect(),
         };
         let full_load = self.assembler.load_vector(&[&gravity, &forces]);
         let prescribed = if loads.prescribed.is_empty() {
@@ -320,15 +420,36 @@ impl Model {
         let full_load = std::mem::take(&mut problem.full_load);
         // Reaction = internal force minus applied load at the supports, so that the reactions
         // balance the loads: sum(reactions) + sum(loads) = 0 at equilibrium.
-        let internal = self.assembler.full_gradient(&[&self.elastic], &z);
+        let internal = self.assembler.full_gradient(&self.terms(), &z);
         let reactions = self
             .fixed_nodes
             .iter()
             .map(|&i| std::array::from_fn(|k| internal[3 * i + k] - full_load[3 * i + k]))
             .collect();
-        let pressure =
-            matches!(self.formulation, Formulation::Mixed { .. }).then(|| z[3 * n..].to_vec());
-        self.last_pressure.clone_from(&pressure);
+        let n_displacement = 3 * n + 3 * self.free_nodes.len();
+        let pressure = matches!(self.formulation, Formulation::Mixed { .. })
+            .then(|| z[n_displacement..].to_vec());
+        self.last_extra = Some(z[3 * n..].to_vec());
+        let cable_points = self
+            .cables
+            .cables
+            .iter()
+            .map(|cable| {
+                (0..cable.points.len())
+                    .map(|k| cable.position(k, &z).into())
+                    .collect()
+            })
+            .collect();
+        let cable_tensions = self
+            .cables
+            .cables
+            .iter()
+            .map(|cable| {
+                (0..cable.n_segments())
+                    .map(|k| cable.tension(k, &z))
+                    .collect()
+            })
+            .collect();
         z.truncate(3 * n);
         for (zi, ri) in z.iter_mut().zip(self.mesh.rest_flat()) {
             *zi += ri;
@@ -337,6 +458,8 @@ impl Model {
             positions: z,
             pressure,
             reactions,
+            cable_points,
+            cable_tensions,
             report,
         })
     }
@@ -378,19 +501,26 @@ impl Model {
 /// node's free displacements before its pressure, and the pressures of fixed nodes (which couple
 /// to no displacement of their own) last. Every pressure pivot then carries `G K^{-1} G^T` and
 /// not just the compliance `C = M_p / lambda`, which vanishes as nu -> 0.5.
-fn saddle_point_order(assembler: &Assembler, node_order: &[usize], fixed: &[bool]) -> Vec<usize> {
+fn saddle_point_order(
+    assembler: &Assembler,
+    node_order: &[usize],
+    fixed: &[bool],
+    pressure_offset: usize,
+) -> Vec<usize> {
     let n = fixed.len();
     let mut order = Vec::with_capacity(assembler.n_free());
+    // Free cable nodes carry no pressure: eliminate them first, like any displacement.
+    order.extend((3 * n..pressure_offset).filter_map(|d| assembler.free_of_full(d)));
     for &node in node_order {
         for d in 3 * node..3 * node + 3 {
             order.extend(assembler.free_of_full(d));
         }
         if !fixed[node] {
-            order.extend(assembler.free_of_full(3 * n + node));
+            order.extend(assembler.free_of_full(pressure_offset + node));
         }
     }
     for node in (0..n).filter(|&i| fixed[i]) {
-        order.extend(assembler.free_of_full(3 * n + node));
+        order.extend(assembler.free_of_full(pressure_offset + node));
     }
     order
 }
@@ -454,7 +584,7 @@ impl NewtonProblem for System<'_> {
             return 0.5 * g.iter().map(|v| v * v).sum::<f64>();
         }
         let external: f64 = self.load.iter().zip(z.iter()).map(|(f, x)| f * x).sum();
-        self.model.assembler.energy(&[&self.model.elastic], z) - external
+        self.model.assembler.energy(&self.model.terms(), z) - external
     }
 
     /// Gradient of the energy minus the loads; in the mixed formulation the volume-constraint
@@ -463,7 +593,7 @@ impl NewtonProblem for System<'_> {
         let eval = self
             .model
             .assembler
-            .evaluate(&[&self.model.elastic], z, true, None);
+            .evaluate(&self.model.terms(), z, true, None);
         if !eval.energy.is_finite() {
             return vec![f64::INFINITY; eval.gradient.len()];
         }
@@ -517,7 +647,7 @@ impl NewtonProblem for System<'_> {
         let eval = self
             .model
             .assembler
-            .evaluate(&[&self.model.elastic], z, false, Some(mode));
+            .evaluate(&self.model.terms(), z, false, Some(mode));
         timings.assembly += t0.elapsed().as_secs_f64();
         let pattern = self.model.assembler.pattern();
         let t0 = Instant::now();
@@ -544,19 +674,9 @@ impl NewtonProblem for System<'_> {
             if !d.iter().all(|v| v.is_finite()) {
                 return Ok(None);
             }
-            // Curvature of the condensed energy W_mu + 1/2 phi^T C^-1 phi along the step:
-            // du^T H_c du = du^T A du + dp^T C dp (with dp = C^-1 G du at a converged constraint).
-            // A non-positive value means A is indefinite enough to head for a saddle, not a
-            // minimum: take the projected Hessian instead.
-            let n_displacement = d.len() - self.n_nodes();
-            let (mut du, mut dp) = (d.clone(), d.clone());
-            du[n_displacement..].fill(0.0);
-            dp[..n_displacement].fill(0.0);
-            let quadratic = |v: &[f64]| -> f64 {
-                pattern.symmetric_matvec(&eval.hessian, v).iter().zip(v).map(|(a, b)| a * b).sum()
-            };
-            let curvature = quadratic(&du) - quadratic(&dp);
-            return Ok((curvature > 0.0).then_some(d));
+            // No inertia test here: the condensed curvature du^T A du + dp^T C dp cancels
+            // catastrophically when the pressure (and so K_geo(p)) is large.
+            return Ok(Some(d));
         }
         let slope: f64 = d.iter().zip(g).map(|(a, b)| a * b).sum();
         Ok((slope < 0.0).then_some(d))

@@ -217,7 +217,9 @@ fn newton_step(
             .rev()
             .take(5)
             .fold(energy, |m, &e| m.max(e));
-        let mut t = 1.0;
+        // Start from twice the last accepted step: after a damped step the full Newton step is
+        // rarely acceptable at once, and each rejected trial costs an energy evaluation.
+        let mut t: f64 = (2.0 * report.step_lengths.last().copied().unwrap_or(1.0)).min(1.0);
         let mut accepted = false;
         let mut trial = z.to_vec();
         for _ in 0..40 {

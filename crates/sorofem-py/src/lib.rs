@@ -267,7 +267,10 @@ impl Model {
             "positions",
             convert::points_to_numpy(py, &solution.positions),
         )?;
-        out.set_item("reactions", convert::points_to_numpy(py, solution.reactions.as_flattened()))?;
+        out.set_item(
+            "reactions",
+            convert::points_to_numpy(py, solution.reactions.as_flattened()),
+        )?;
         match solution.pressure {
             Some(p) => out.set_item("pressure", PyArray1::from_vec(py, p))?,
             None => out.set_item("pressure", py.None())?,

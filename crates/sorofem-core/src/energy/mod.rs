@@ -4,9 +4,11 @@
 //!
 //! The displacement unknowns are displacements from the rest shape (m), not positions.
 
+pub mod cable;
 pub mod elastic;
 pub mod loads;
 
+pub use cable::{Cable, CableTerm, PointMap};
 pub use elastic::{ElasticTerm, Formulation, PressureMass};
 pub use loads::{GravityTerm, NodalForceTerm};
 

@@ -1,0 +1,208 @@
+//! Cables: chains of unilateral springs between material points, free nodes or world anchors.
+//!
+//! Segment k joins points `y_k` and `y_{k+1}` (m). Its stretch is `s = L - alpha l_k` (m), with
+//! `L = |y_{k+1} - y_k|`, `l_k` the rest length and `alpha` the actuation (1: rest, < 1: pulled).
+//! The energy `k psi(s)` (J, `k` the segment stiffness in N/m) is unilateral and smooth:
+//!
+//! ```text
+//! psi(s) = 0                          s <= 0        (slack: no force)
+//!        = s^3 / (6 w)                0 <= s <= w   (transition)
+//!        = (s - w/2)^2 / 2 + w^2/24   s >= w        (taut: a linear spring)
+//! ```
+//!
+//! so the tension `k psi'(s)` is C1 and rises from 0 to `k (s - w/2)` across a transition of width
+//! `w = transition * l_k`. Each point is an affine function of the DOFs, `y = y0 + sum_a w_a u_a`:
+//! barycentric weights of the tet that contains a material point, weight 1 on a free node's own
+//! DOFs, or no DOFs for a world anchor. Gradient and Hessian are mapped through those weights
+//! (`f = W^T f_y`, `K = W^T K_y W`); `K_y` is positive semi-definite because `psi'' >= 0` and
+//! `psi' >= 0`.
+
+use super::{HessianMode, Term};
+use nalgebra::{Matrix3, Vector3};
+
+/// Where a cable point is: `y = offset + sum_i weights[i] * u[dof_blocks[i]]` (3-vectors).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PointMap {
+    /// Rest position for material points and free nodes (m); the fixed position of an anchor.
+    pub offset: [f64; 3],
+    /// First full DOF of each 3-DOF block the point depends on (`3 i` for node i).
+    pub dof_blocks: Vec<usize>,
+    pub weights: Vec<f64>,
+}
+
+/// One cable: its points, per-segment rest lengths (m), stiffness (N/m), actuation and
+/// transition width (fraction of the rest length).
+#[derive(Clone, Debug)]
+pub struct Cable {
+    pub points: Vec<PointMap>,
+    pub rest_lengths: Vec<f64>,
+    pub stiffness: f64,
+    pub actuation: f64,
+    pub transition: f64,
+}
+
+/// `(psi, psi', psi'')` of the unilateral spring at stretch `s` with transition width `w`.
+pub fn unilateral(s: f64, w: f64) -> (f64, f64, f64) {
+    if s <= 0.0 {
+        (0.0, 0.0, 0.0)
+    } else if s <= w {
+        (s * s * s / (6.0 * w), s * s / (2.0 * w), s / w)
+    } else {
+        let t = s - 0.5 * w;
+        (0.5 * t * t + w * w / 24.0, t, 1.0)
+    }
+}
+
+impl Cable {
+    /// Maximum number of DOF blocks one point may touch (a tet has 4 nodes).
+    pub const MAX_BLOCKS: usize = 4;
+
+    pub fn n_segments(&self) -> usize {
+        self.points.len().saturating_sub(1)
+    }
+
+    /// Current position of point `k` given the full DOF vector.
+    pub fn position(&self, k: usize, z: &[f64]) -> Vector3<f64> {
+        let p = &self.points[k];
+        let mut y = Vector3::from(p.offset);
+        for (&b, &w) in p.dof_blocks.iter().zip(&p.weights) {
+            y += w * Vector3::new(z[b], z[b + 1], z[b + 2]);
+        }
+        y
+    }
+
+    /// Tension (N) of segment `k` at the full DOF vector `z`.
+    pub fn tension(&self, k: usize, z: &[f64]) -> f64 {
+        let length = (self.position(k + 1, z) - self.position(k, z)).norm();
+        let rest = self.rest_lengths[k];
+        self.stiffness * unilateral(length - self.actuation * rest, self.transition * rest).1
+    }
+}
+
+/// All segments of all cables as one term. Element = segment; its stencil is the DOF blocks of
+/// both endpoints, padded to `2 * MAX_BLOCKS` blocks with weight 0 (so all elements share one size).
+pub struct CableTerm {
+    pub cables: Vec<Cable>,
+    /// (cable, segment) of each element.
+    segments: Vec<(usize, usize)>,
+}
+
+impl CableTerm {
+    pub fn new(cables: Vec<Cable>) -> Self {
+        let segments = cables
+            .iter()
+            .enumerate()
+            .flat_map(|(c, cable)| (0..cable.n_segments()).map(move |k| (c, k)))
+            .collect();
+        CableTerm { cables, segments }
+    }
+
+    /// Blocks and weights of both endpoints, padded: `(blocks, weights)` of length 8.
+    fn endpoint_maps(&self, e: usize) -> ([Option<usize>; 8], [f64; 16]) {
+        let (c, k) = self.segments[e];
+        let cable = &self.cables[c];
+        let mut blocks = [None; 8];
+        // weights[end * 8 + slot]: weight of slot `slot` in endpoint `end`'s position.
+        let mut weights = [0.0; 16];
+        for (end, point) in [&cable.points[k], &cable.points[k + 1]]
+            .into_iter()
+            .enumerate()
+        {
+            for (slot, (&b, &w)) in point.dof_blocks.iter().zip(&point.weights).enumerate() {
+                blocks[end * 4 + slot] = Some(b);
+                weights[end * 8 + end * 4 + slot] = w;
+            }
+        }
+        (blocks, weights)
+    }
+}
+
+impl Term for CableTerm {
+    fn stencil_size(&self) -> usize {
+        3 * 2 * Cable::MAX_BLOCKS
+    }
+
+    fn n_elements(&self) -> usize {
+        self.segments.len()
+    }
+
+    fn element_dofs(&self, e: usize, dofs: &mut [usize]) {
+        let (blocks, _) = self.endpoint_maps(e);
+        // Padding slots repeat a real DOF with weight 0 so that every index is valid.
+        let fallback = blocks.iter().flatten().next().copied().unwrap_or(0);
+        for (slot, b) in blocks.iter().enumerate() {
+            let base = b.unwrap_or(fallback);
+            for i in 0..3 {
+                dofs[3 * slot + i] = base + i;
+            }
+        }
+    }
+
+    fn element(
+        &self,
+        e: usize,
+        z: &[f64],
+        grad: Option<&mut [f64]>,
+        hess: Option<&mut [f64]>,
+        _: HessianMode,
+    ) -> f64 {
+        let (c, k) = self.segments[e];
+        let cable = &self.cables[c];
+        let (_, weights) = self.endpoint_maps(e);
+        // Endpoint positions from the local DOFs: slot s (0..8) holds z[3 s..3 s + 3].
+        let mut y = [
+            Vector3::from(cable.points[k].offset),
+            Vector3::from(cable.points[k + 1].offset),
+        ];
+        for end in 0..2 {
+            for slot in 0..8 {
+                let w = weights[end * 8 + slot];
+                if w != 0.0 {
+                    y[end] += w * Vector3::new(z[3 * slot], z[3 * slot + 1], z[3 * slot + 2]);
+                }
+            }
+        }
+        let d = y[1] - y[0];
+        let length = d.norm();
+        let rest = cable.rest_lengths[k];
+        let (psi, dpsi, d2psi) =
+            unilateral(length - cable.actuation * rest, cable.transition * rest);
+        let stiffness = cable.stiffness;
+        if grad.is_none() && hess.is_none() {
+            return stiffness * psi;
+        }
+        // A zero-length taut segment has no direction; it cannot occur with alpha > 0 (s < 0).
+        let n = if length > 0.0 {
+            d / length
+        } else {
+            Vector3::zeros()
+        };
+        // Derivative of y1 - y0 with respect to slot s: coefficient (w1_s - w0_s) times identity.
+        let coefficient: [f64; 8] = std::array::from_fn(|slot| weights[8 + slot] - weights[slot]);
+        if let Some(grad) = grad {
+            let f = stiffness * dpsi * n;
+            for slot in 0..8 {
+                for i in 0..3 {
+                    grad[3 * slot + i] = coefficient[slot] * f[i];
+                }
+            }
+        }
+        if let Some(hess) = hess {
+            let geometric = if length > 0.0 { dpsi / length } else { 0.0 };
+            let nn = n * n.transpose();
+            let block: Matrix3<f64> =
+                stiffness * (d2psi * nn + geometric * (Matrix3::identity() - nn));
+            for a in 0..8 {
+                for b in 0..8 {
+                    let scale = coefficient[a] * coefficient[b];
+                    for i in 0..3 {
+                        for j in 0..3 {
+                            hess[(3 * a + i) * 24 + 3 * b + j] = scale * block[(i, j)];
+                        }
+                    }
+                }
+            }
+        }
+        stiffness * psi
+    }
+}
