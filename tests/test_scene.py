@@ -79,7 +79,7 @@ BAD_SCENES = [
     (replace("youngs_modulus = 66e3", "youngs_modulus = -66e3"), "material.youngs_modulus"),
     (replace("density = 1080", "density = -1"), "material.density"),
     (replace("poisson_ratio = 0.45\n", ""), "material.youngs_modulus"),
-    (replace('kind = "standard"', 'kind = "mixed"'), "formulation.kind"),
+    (replace('kind = "standard"', 'kind = "hybrid"'), "formulation.kind"),
     (replace("cells = [4, 1, 1]", "cells = [4, 1]"), "mesh.box.cells"),
     (replace("cells = [4, 1, 1]", "cells = [4, 0, 1]"), "mesh.box.cells"),
     (replace("size = [0.1, 0.02, 0.02]", "size = [0.1, 0.02, -0.02]"), "mesh.box.size"),

@@ -68,13 +68,16 @@ class Model:
         formulation: str = "standard",
         options: dict[str, Any] | None = None,
     ) -> None:
-        """formulation "standard" | "mixed"; options: "volumetric" ("log" | "linear"),
-        "pressure_mass" ("consistent" | "lumped", mixed only)."""
+        """formulation "standard" | "mixed"; options: "volumetric" ("log": c = ln J, default |
+        "linear": c = J - 1; both formulations), "pressure_mass" ("consistent", default |
+        "lumped"; mixed only, ignored otherwise). The mixed unknowns are the free
+        displacements and one pressure per node (Pa), fixed nodes included."""
     @property
     def n_free(self) -> int:
         """Number of free degrees of freedom."""
     def set_material(self, mu: _F, lam: _F, rho: _F) -> None:
-        """Per-element shear modulus, Lame lambda (Pa) and density (kg/m^3), each (m,)."""
+        """Per-element shear modulus, Lame lambda (Pa) and density (kg/m^3), each (m,).
+        Raises ParameterError for mu <= 0, lam < 0 (lam <= 0 when mixed) or rho < 0."""
     def solve(
         self,
         gravity: _F,

@@ -8,6 +8,10 @@ Usage::
 
 ``run`` writes ``DIR/result.vtu``, ``DIR/summary.json``, ``DIR/shape.png`` and
 ``DIR/convergence.png``. It only ever writes those names and never deletes anything.
+``summary.json`` records, besides the solver report, the volume bookkeeping
+``volume_change`` ((V_deformed - V_rest) / V_rest) and ``mean_log_j`` (sum V_e ln J_e / V),
+and for ``kind = "mixed"`` the pressure range ``min_pressure``/``max_pressure`` (Pa); the
+pressure field itself is the point data ``pressure`` of ``result.vtu``.
 
 Exit codes: 0 success; 2 bad input (scene, mesh or arguments: one ``error: ...`` line on
 stderr); 3 the solver failed (``summary.json`` is still written, with
@@ -161,6 +165,7 @@ def _run(args: argparse.Namespace) -> int:
         "n_nodes": scene.mesh.n_nodes,
         "n_tets": scene.mesh.n_tets,
         "formulation": scene.formulation,
+        "formulation_options": scene.body.formulation_options,
         "material": scene.material.to_dict(),
         "gravity": scene.gravity.tolist(),
         "solver_options": dict(scene.solver),
@@ -199,10 +204,15 @@ def _run(args: argparse.Namespace) -> int:
     if args.json:
         sys.stdout.write(text)
     elif not args.quiet:
-        print(f"{scene.path.name}: {scene.mesh.n_nodes} nodes, {scene.mesh.n_tets} tets, {scene.formulation}")
+        options = ", ".join(f"{k} {v}" for k, v in scene.body.formulation_options.items())
+        print(f"{scene.path.name}: {scene.mesh.n_nodes} nodes, {scene.mesh.n_tets} tets, "
+              f"{scene.formulation} ({options})")
         print(result.report.summary())
         print(f"max displacement {result.max_displacement:.6g} m, min J {result.J.min():.4f}, "
               f"max von Mises {result.von_mises.max():.4g} Pa")
+        print(f"volume change {result.volume_change:.3e}, mean ln J {result.mean_log_j:.3e}")
+        if result.pressure is not None:
+            print(f"pressure {result.pressure.min():.4g} .. {result.pressure.max():.4g} Pa")
         print(f"wrote {', '.join(OUTPUT_NAMES)} to {out}")
     return EXIT_OK
 

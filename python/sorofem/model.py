@@ -920,6 +920,9 @@ class StaticResult:
         Nodal pressure ``(n_nodes,)`` in Pa for mixed formulations, ``None`` for ``"standard"``.
         It is the multiplier of the volume constraint, ``p ~ lambda c(J)``: positive where
         the material is stretched in volume (the mean Cauchy stress is ``p / J``).
+        Equal-order P1-P1 is not inf-sup stable: as nu -> 0.5 the nodal pressure can
+        oscillate (on coarse meshes even flip sign across a bent beam) while the
+        displacement stays accurate; judge pressures on refined meshes.
     report
         The :class:`SolveReport`.
 

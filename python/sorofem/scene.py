@@ -11,11 +11,13 @@ Schema
 
     [material]                 # required; Neo-Hookean
     youngs_modulus = 66e3      # Pa; or shear_modulus + lame_lambda (Pa)
-    poisson_ratio = 0.45       # 0 < nu < 0.5
+    poisson_ratio = 0.45       # 0 <= nu < 0.5 (nu = 0.5 is rejected: lambda must be finite)
     density = 1080             # kg/m^3, optional (default 0)
 
     [formulation]              # optional
-    kind = "standard"          # the only kind for now
+    kind = "standard"          # or "mixed": displacement + nodal pressure, no locking as nu -> 0.5
+    volumetric = "log"         # optional: c(J) = ln J ("log") or J - 1 ("linear")
+    pressure_mass = "consistent"   # optional, mixed only: "consistent" or "lumped"
 
     [[fixed]]                  # required, at least one entry, each selecting >= 1 node
     box = { min = [-1e-9, -1, -1], max = [1e-9, 1, 1] }   # or nodes = [0, 1, 2]
@@ -57,13 +59,23 @@ import numpy as np
 
 from .errors import InputError, ParameterError, SceneError
 from .io import read_mesh
-from .model import FORMULATIONS, Body, Mesh, NeoHookean, StaticResult, solve_static
+from .model import (
+    FORMULATIONS,
+    PRESSURE_MASSES,
+    VOLUMETRIC_MEASURES,
+    Body,
+    Mesh,
+    NeoHookean,
+    StaticResult,
+    solve_static,
+)
 
 __all__ = ["Scene"]
 
 _TOP_KEYS = ("mesh", "material", "formulation", "fixed", "loads", "solver")
 _MATERIAL_KEYS = ("youngs_modulus", "poisson_ratio", "shear_modulus", "lame_lambda", "density")
 _SOLVER_DEFAULTS: dict[str, Any] = {"tolerance": 1e-8, "max_iterations": 50, "load_steps": 1}
+_FORMULATION_DEFAULTS: dict[str, str] = {"kind": "standard", "volumetric": "log", "pressure_mass": "consistent"}
 
 _HEADER = re.compile(r"^\s*(\[\[?)\s*([^\]]+?)\s*\]\]?\s*(#.*)?$")
 _KEY_PART = re.compile(r"^([A-Za-z0-9_\-]+)(?:\[(\d+)\])?$")
@@ -195,6 +207,9 @@ class Scene:
         The model, with the ``[[fixed]]`` conditions and ``[loads].forces`` applied to ``body``.
     formulation
         ``[formulation].kind``.
+    formulation_options
+        ``[formulation]`` ``volumetric`` and ``pressure_mass`` (keyword arguments of
+        :class:`sorofem.Body`), defaults filled in.
     gravity
         ``(3,)`` m/s^2.
     solver
@@ -215,6 +230,9 @@ class Scene:
     formulation: str
     gravity: np.ndarray
     solver: dict[str, Any] = field(default_factory=lambda: dict(_SOLVER_DEFAULTS))
+    formulation_options: dict[str, str] = field(
+        default_factory=lambda: {k: v for k, v in _FORMULATION_DEFAULTS.items() if k != "kind"}
+    )
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> "Scene":
@@ -256,9 +274,9 @@ class Scene:
 
         mesh = _build_mesh(check, data["mesh"], path.parent)
         material = _build_material(check, data["material"])
-        formulation = _build_formulation(check, data.get("formulation", {}))
+        formulation, options = _build_formulation(check, data.get("formulation", {}))
         try:
-            body = Body(mesh, material, formulation=formulation)
+            body = Body(mesh, material, formulation=formulation, **options)
         except ParameterError as exc:
             raise check.error(f"material.{exc.parameter or 'youngs_modulus'}", str(exc)) from None
         _apply_fixed(check, data["fixed"], body)
@@ -272,6 +290,7 @@ class Scene:
             formulation=formulation,
             gravity=gravity,
             solver=solver,
+            formulation_options=options,
         )
 
     def solve(self) -> StaticResult:
@@ -284,6 +303,7 @@ class Scene:
             "scene": str(self.path),
             "mesh": None if self.mesh.source is None else str(self.mesh.source),
             "formulation": self.formulation,
+            "formulation_options": self.body.formulation_options,
             "material": self.material.to_dict(),
             "gravity": self.gravity.tolist(),
             "fixed_nodes": int(self.body.fixed_nodes.size),
@@ -337,15 +357,24 @@ def _build_material(check: _Checker, raw: Any) -> NeoHookean:
         raise check.error(f"material.{name}", str(exc).removeprefix(f"{name}: ")) from None
 
 
-def _build_formulation(check: _Checker, raw: Any) -> str:
+def _build_formulation(check: _Checker, raw: Any) -> tuple[str, dict[str, str]]:
+    """``kind`` and the keyword arguments ``volumetric``, ``pressure_mass`` of :class:`Body`."""
     table = check.table(raw, "formulation")
-    check.keys(table, ("kind",), "formulation")
-    kind = check.string(table.get("kind", "standard"), "formulation.kind")
-    if kind not in FORMULATIONS:
-        raise check.error(
-            "formulation.kind", f"expected one of {', '.join(repr(f) for f in FORMULATIONS)}, got {kind!r}"
-        )
-    return kind
+    check.keys(table, tuple(_FORMULATION_DEFAULTS), "formulation")
+    values = {}
+    for name, allowed in (
+        ("kind", FORMULATIONS),
+        ("volumetric", VOLUMETRIC_MEASURES),
+        ("pressure_mass", PRESSURE_MASSES),
+    ):
+        value = check.string(table.get(name, _FORMULATION_DEFAULTS[name]), f"formulation.{name}")
+        if value not in allowed:
+            raise check.error(
+                f"formulation.{name}", f"expected one of {', '.join(repr(a) for a in allowed)}, got {value!r}"
+            )
+        values[name] = value
+    kind = values.pop("kind")
+    return kind, values
 
 
 def _select_nodes(check: _Checker, entry: dict[str, Any], prefix: str, mesh: Mesh) -> np.ndarray:

@@ -1,0 +1,1 @@
+"""Reference solvers from other libraries, timed against sorofem by ``benchmarks/run.py``."""
