@@ -23,5 +23,7 @@ pub mod newton;
 
 pub use error::{Error, Result};
 pub use mesh::{Orientation, TetMesh};
-pub use model::{Formulation, Loads, Material, Model, PressureMass, Solution, SolveOptions};
+pub use model::{
+    Damping, Formulation, Loads, Material, Model, PressureMass, Solution, SolveOptions, Trajectory,
+};
 pub use newton::SolveReport;

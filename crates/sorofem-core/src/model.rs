@@ -380,28 +380,7 @@ impl Model {
             }
             None => {}
         }
-        let gravity = GravityTerm {
-            mesh: self.mesh.clone(),
-            density: self.density.clone(),
-            gravity: loads.gravity,
-        };
-        // Free cable node i is DOF block n + i; its weight is a point force.
-        let free_node_weights = self
-            .free_nodes
-            .iter()
-            .enumerate()
-            .map(|(i, &(_, mass))| (n + i, loads.gravity.map(|g| mass * g)));
-        let point_forces: Vec<(usize, [f64; 3])> = loads
-            .nodal_forces
-            .iter()
-            .copied()
-            .chain(free_node_weights)
-            .collect();
-        let forces = NodalForceTerm {
-            nodes: point_forces.iter().map(|f| f.0).collect(),
-            forces: point_forces.iter().map(|f| f.1).collect(),
-        };
-        let full_load = self.assembler.load_vector(&[&gravity, &forces]);
+        let full_load = self.load_vector(loads);
         let prescribed = if loads.prescribed.is_empty() {
             vec![[0.0; 3]; self.fixed_nodes.len()]
         } else {
@@ -413,6 +392,7 @@ impl Model {
             load: Vec::new(),
             load_free_norm: 0.0,
             prescribed,
+            step: None,
         };
         // Only the prescribed displacements are scaled by the load factor: the initial guess is
         // kept as given for the free DOFs, which is what warm starts need.
@@ -462,6 +442,286 @@ impl Model {
             cable_tensions,
             report,
         })
+    }
+
+    /// External load vector (N, full DOFs) of `loads`, free cable nodes' weight included.
+    fn load_vector(&self, loads: &Loads) -> Vec<f64> {
+        let n = self.mesh.n_nodes();
+        let gravity = GravityTerm {
+            mesh: self.mesh.clone(),
+            density: self.density.clone(),
+            gravity: loads.gravity,
+        };
+        let free_node_weights = self
+            .free_nodes
+            .iter()
+            .enumerate()
+            .map(|(i, &(_, mass))| (n + i, loads.gravity.map(|g| mass * g)));
+        let point_forces: Vec<(usize, [f64; 3])> = loads
+            .nodal_forces
+            .iter()
+            .copied()
+            .chain(free_node_weights)
+            .collect();
+        let forces = NodalForceTerm {
+            nodes: point_forces.iter().map(|f| f.0).collect(),
+            forces: point_forces.iter().map(|f| f.1).collect(),
+        };
+        self.assembler.load_vector(&[&gravity, &forces])
+    }
+
+    /// Lumped mass (kg) of every full DOF: `rho V / 4` per tet and node, free cable nodes' own
+    /// masses, zero for pressures.
+    fn lumped_mass(&self) -> Vec<f64> {
+        let n = self.mesh.n_nodes();
+        let mut mass = vec![0.0; self.assembler.n_full()];
+        for (e, tet) in self.mesh.tets().iter().enumerate() {
+            let m = self.density[e] * self.mesh.volumes()[e] / 4.0;
+            for &i in tet {
+                for k in 0..3 {
+                    mass[3 * i + k] += m;
+                }
+            }
+        }
+        for (i, &(_, m)) in self.free_nodes.iter().enumerate() {
+            mass[3 * (n + i)..3 * (n + i) + 3].fill(m);
+        }
+        mass
+    }
+
+    /// Implicit Euler in time: each step minimises the incremental potential
+    /// `1/2 |u - u_n - h v_n|_M^2 / h^2 + 1/2 |u - u_n|_D^2 / h + Pi(u)` (lumped mass M,
+    /// Rayleigh damping `D = alpha_M M + beta_K K_n`), then `v = (u - u_n) / h`. A step whose
+    /// Newton solve fails is split in two, up to six times. `actuation[s][c]` is cable c's
+    /// alpha during step s. Starts from `initial_positions` (3 n, m; default rest) at rest or with
+    /// `initial_velocities` (3 n, m/s).
+    #[allow(clippy::too_many_arguments)]
+    pub fn simulate(
+        &mut self,
+        loads: &Loads,
+        dt: f64,
+        steps: usize,
+        actuation: &[Vec<f64>],
+        damping: Damping,
+        initial_positions: Option<&[f64]>,
+        initial_velocities: Option<&[f64]>,
+        options: &SolveOptions,
+        save_every: usize,
+    ) -> Result<Trajectory> {
+        if !self.material_set {
+            return Err(Error::invalid(
+                "material",
+                "set_material() before simulate()",
+                "no material",
+            ));
+        }
+        if !(dt > 0.0 && dt.is_finite()) {
+            return Err(Error::invalid("dt", "a time step > 0 s", dt));
+        }
+        if actuation.len() != steps || actuation.iter().any(|row| row.len() != self.n_cables()) {
+            return Err(Error::shape(
+                "actuation",
+                format!(
+                    "({steps}, {}): one alpha per step and cable",
+                    self.n_cables()
+                ),
+                format!("{} rows", actuation.len()),
+            ));
+        }
+        if !(damping.mass >= 0.0 && damping.stiffness >= 0.0) {
+            return Err(Error::invalid(
+                "damping",
+                "Rayleigh coefficients >= 0",
+                format!("{damping:?}"),
+            ));
+        }
+        let n = self.mesh.n_nodes();
+        let prescribed = if loads.prescribed.is_empty() {
+            vec![[0.0; 3]; self.fixed_nodes.len()]
+        } else {
+            loads.prescribed.clone()
+        };
+        let full_load = self.load_vector(loads);
+        let rest = self.mesh.rest_flat();
+        let mut z = vec![0.0; self.assembler.n_full()];
+        if let Some(x) = initial_positions {
+            if x.len() != 3 * n {
+                return Err(Error::shape(
+                    "initial_positions",
+                    format!("({n}, 3)"),
+                    format!("{} values", x.len()),
+                ));
+            }
+            check_finite("initial_positions", x)?;
+            for i in 0..3 * n {
+                z[i] = x[i] - rest[i];
+            }
+        }
+        let free: Vec<usize> = self.assembler.full_of_free().to_vec();
+        let mass_full = self.lumped_mass();
+        let mass: Vec<f64> = free.iter().map(|&d| mass_full[d]).collect();
+        let mut velocity = vec![0.0; free.len()];
+        if let Some(v) = initial_velocities {
+            if v.len() != 3 * n {
+                return Err(Error::shape(
+                    "initial_velocities",
+                    format!("({n}, 3)"),
+                    format!("{} values", v.len()),
+                ));
+            }
+            check_finite("initial_velocities", v)?;
+            for (f, &d) in free.iter().enumerate() {
+                if d < 3 * n {
+                    velocity[f] = v[d];
+                }
+            }
+        }
+        let diagonal: Vec<usize> = (0..free.len())
+            .map(|f| {
+                self.assembler
+                    .pattern()
+                    .position(f, f)
+                    .expect("diagonal in pattern")
+            })
+            .collect();
+        let n_free_displacement = match self.formulation {
+            Formulation::Standard => free.len(),
+            Formulation::Mixed { .. } => free.len() - n,
+        };
+        let step_options = SolveOptions {
+            load_steps: 1,
+            max_cutbacks: 0,
+            ..options.clone()
+        };
+        let mut trajectory = Trajectory::default();
+        let save =
+            |model: &Model, z: &[f64], velocity: &[f64], t: f64, trajectory: &mut Trajectory| {
+                trajectory.times.push(t);
+                trajectory
+                    .positions
+                    .push((0..3 * n).map(|i| rest[i] + z[i]).collect());
+                trajectory.cable_points.push(
+                    model
+                        .cables
+                        .cables
+                        .iter()
+                        .map(|c| {
+                            (0..c.points.len())
+                                .map(|k| c.position(k, z).into())
+                                .collect()
+                        })
+                        .collect(),
+                );
+                trajectory.kinetic_energy.push(
+                    0.5 * mass
+                        .iter()
+                        .zip(velocity)
+                        .map(|(m, v)| m * v * v)
+                        .sum::<f64>(),
+                );
+            };
+        save(self, &z, &velocity, 0.0, &mut trajectory);
+        let mut time = 0.0;
+        for (s, alphas) in actuation.iter().enumerate() {
+            for (c, &alpha) in alphas.iter().enumerate() {
+                self.set_actuation(c, alpha)?;
+            }
+            // Halve the step on failure: a queue of sub-steps that must add up to dt.
+            let mut pending = vec![(dt, 0usize)];
+            let mut iterations = 0;
+            while let Some((h, depth)) = pending.pop() {
+                let previous: Vec<f64> = free.iter().map(|&d| z[d]).collect();
+                let predicted: Vec<f64> = previous
+                    .iter()
+                    .zip(&velocity)
+                    .map(|(u, v)| u + h * v)
+                    .collect();
+                let stiffness_damping = if damping.stiffness > 0.0 {
+                    let mut k = self
+                        .assembler
+                        .evaluate(&self.terms(), &z, false, Some(HessianMode::Projected))
+                        .hessian;
+                    let pattern = self.assembler.pattern();
+                    for col in 0..pattern.n {
+                        for p in pattern.col_ptr[col]..pattern.col_ptr[col + 1] {
+                            let row = pattern.row_idx[p];
+                            k[p] = if row < n_free_displacement && col < n_free_displacement {
+                                k[p] * damping.stiffness / h
+                            } else {
+                                0.0
+                            };
+                        }
+                    }
+                    k
+                } else {
+                    Vec::new()
+                };
+                let step = StepTerms {
+                    inertia: mass.iter().map(|m| m / (h * h)).collect(),
+                    predicted: predicted.clone(),
+                    previous: previous.clone(),
+                    mass_damping: mass.iter().map(|m| damping.mass * m / h).collect(),
+                    stiffness_damping,
+                    diagonal: diagonal.clone(),
+                };
+                let mut trial = z.clone();
+                for (f, &d) in free.iter().enumerate() {
+                    if f < n_free_displacement {
+                        trial[d] = predicted[f];
+                    }
+                }
+                let mut problem = System {
+                    model: self,
+                    full_load: full_load.clone(),
+                    load: Vec::new(),
+                    load_free_norm: 0.0,
+                    prescribed: prescribed.clone(),
+                    step: Some(step),
+                };
+                match newton::solve(&mut problem, &mut trial, &step_options) {
+                    Ok(report) => {
+                        iterations += report.iterations;
+                        for (f, &d) in free.iter().enumerate() {
+                            velocity[f] = if f < n_free_displacement {
+                                (trial[d] - previous[f]) / h
+                            } else {
+                                0.0
+                            };
+                        }
+                        z = trial;
+                    }
+                    Err(Error::NotConverged { report, .. }) if depth < 6 => {
+                        iterations += report.iterations;
+                        trajectory.cutbacks += 1;
+                        pending.push((h / 2.0, depth + 1));
+                        pending.push((h / 2.0, depth + 1));
+                    }
+                    Err(Error::NotConverged { mut report, .. }) => {
+                        let message = format!(
+                            "time step {s} (t = {time:.4} s) did not converge even at dt = {h:.3e} s; last relative residuals: {:?}",
+                            report.residual_history.iter().rev().take(5).rev().map(|r| format!("{r:.3e}")).collect::<Vec<_>>()
+                        );
+                        report.message = message.clone();
+                        return Err(Error::NotConverged { message, report });
+                    }
+                    Err(other) => return Err(other),
+                }
+            }
+            time += dt;
+            trajectory.iterations.push(iterations);
+            if (s + 1) % save_every.max(1) == 0 || s + 1 == steps {
+                save(self, &z, &velocity, time, &mut trajectory);
+            }
+        }
+        let mut v_nodes = vec![0.0; 3 * n];
+        for (f, &d) in free.iter().enumerate() {
+            if d < 3 * n {
+                v_nodes[d] = velocity[f];
+            }
+        }
+        trajectory.velocities = v_nodes;
+        self.last_extra = Some(z[3 * n..].to_vec());
+        Ok(trajectory)
     }
 
     /// Per-tet volume ratio `J = det F` and von Mises Cauchy stress (Pa) at `positions` (3 n).
@@ -533,6 +793,96 @@ struct System<'a> {
     load: Vec<f64>,
     load_free_norm: f64,
     prescribed: Vec<[f64; 3]>,
+    /// Inertia and damping of an implicit Euler step, when the solve is one.
+    step: Option<StepTerms>,
+}
+
+/// The quadratic terms implicit Euler adds to the energy (free DOFs `d`):
+/// `1/2 sum_d inertia_d (u_d - predicted_d)^2 + 1/2 (u - previous)^T D (u - previous)` with
+/// `inertia = m / h^2` and the Rayleigh damping `D = (alpha_M M + beta_K K_n) / h`, `K_n` the
+/// projected (positive semi-definite) displacement Hessian at the start of the step.
+struct StepTerms {
+    inertia: Vec<f64>,
+    predicted: Vec<f64>,
+    previous: Vec<f64>,
+    mass_damping: Vec<f64>,
+    /// `beta_K / h K_n` in the Hessian's lower-triangle layout (empty without stiffness damping).
+    stiffness_damping: Vec<f64>,
+    diagonal: Vec<usize>,
+}
+
+impl StepTerms {
+    fn energy(&self, free: &[f64], pattern: &crate::linear::LowerPattern) -> f64 {
+        let mut e = 0.0;
+        for d in 0..free.len() {
+            let a = free[d] - self.predicted[d];
+            let b = free[d] - self.previous[d];
+            e += 0.5 * (self.inertia[d] * a * a + self.mass_damping[d] * b * b);
+        }
+        if !self.stiffness_damping.is_empty() {
+            let delta: Vec<f64> = free
+                .iter()
+                .zip(&self.previous)
+                .map(|(x, y)| x - y)
+                .collect();
+            let kd = pattern.symmetric_matvec(&self.stiffness_damping, &delta);
+            e += 0.5 * kd.iter().zip(&delta).map(|(a, b)| a * b).sum::<f64>();
+        }
+        e
+    }
+
+    fn add_gradient(&self, free: &[f64], pattern: &crate::linear::LowerPattern, g: &mut [f64]) {
+        for d in 0..free.len() {
+            g[d] += self.inertia[d] * (free[d] - self.predicted[d])
+                + self.mass_damping[d] * (free[d] - self.previous[d]);
+        }
+        if !self.stiffness_damping.is_empty() {
+            let delta: Vec<f64> = free
+                .iter()
+                .zip(&self.previous)
+                .map(|(x, y)| x - y)
+                .collect();
+            for (gi, kd) in g
+                .iter_mut()
+                .zip(pattern.symmetric_matvec(&self.stiffness_damping, &delta))
+            {
+                *gi += kd;
+            }
+        }
+    }
+
+    fn add_hessian(&self, hessian: &mut [f64]) {
+        for (d, &p) in self.diagonal.iter().enumerate() {
+            hessian[p] += self.inertia[d] + self.mass_damping[d];
+        }
+        for (h, k) in hessian.iter_mut().zip(&self.stiffness_damping) {
+            *h += k;
+        }
+    }
+}
+
+/// Rayleigh damping `C = mass M + stiffness K` (1/s and s).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Damping {
+    pub mass: f64,
+    pub stiffness: f64,
+}
+
+/// Frames of a dynamic simulation.
+#[derive(Clone, Debug, Default)]
+pub struct Trajectory {
+    pub times: Vec<f64>,
+    /// Node positions (m, 3 n) per saved frame.
+    pub positions: Vec<Vec<f64>>,
+    pub cable_points: Vec<Vec<Vec<[f64; 3]>>>,
+    /// Kinetic energy (J) per saved frame.
+    pub kinetic_energy: Vec<f64>,
+    /// Node velocities (m/s, 3 n) at the end.
+    pub velocities: Vec<f64>,
+    /// Newton iterations of every step (a cut step counts its sub-steps' sum).
+    pub iterations: Vec<usize>,
+    /// Times a step was halved after a Newton failure.
+    pub cutbacks: usize,
 }
 
 impl System<'_> {
@@ -542,6 +892,15 @@ impl System<'_> {
 
     fn is_mixed(&self) -> bool {
         matches!(self.model.formulation, Formulation::Mixed { .. })
+    }
+
+    fn free_values(&self, z: &[f64]) -> Vec<f64> {
+        self.model
+            .assembler
+            .full_of_free()
+            .iter()
+            .map(|&d| z[d])
+            .collect()
     }
 }
 
@@ -584,7 +943,11 @@ impl NewtonProblem for System<'_> {
             return 0.5 * g.iter().map(|v| v * v).sum::<f64>();
         }
         let external: f64 = self.load.iter().zip(z.iter()).map(|(f, x)| f * x).sum();
-        self.model.assembler.energy(&self.model.terms(), z) - external
+        let mut energy = self.model.assembler.energy(&self.model.terms(), z) - external;
+        if let Some(step) = &self.step {
+            energy += step.energy(&self.free_values(z), self.model.assembler.pattern());
+        }
+        energy
     }
 
     /// Gradient of the energy minus the loads; in the mixed formulation the volume-constraint
@@ -600,6 +963,9 @@ impl NewtonProblem for System<'_> {
         let mut g = eval.gradient;
         for (gi, &d) in g.iter_mut().zip(self.model.assembler.full_of_free()) {
             *gi -= self.load[d];
+        }
+        if let Some(step) = &self.step {
+            step.add_gradient(&self.free_values(z), self.model.assembler.pattern(), &mut g);
         }
         if self.is_mixed() {
             let n = self.n_nodes();
@@ -644,10 +1010,13 @@ impl NewtonProblem for System<'_> {
             HessianMode::Exact
         };
         let t0 = Instant::now();
-        let eval = self
+        let mut eval = self
             .model
             .assembler
             .evaluate(&self.model.terms(), z, false, Some(mode));
+        if let Some(step) = &self.step {
+            step.add_hessian(&mut eval.hessian);
+        }
         timings.assembly += t0.elapsed().as_secs_f64();
         let pattern = self.model.assembler.pattern();
         let t0 = Instant::now();

@@ -75,6 +75,33 @@ pub fn vector(
     Ok(values)
 }
 
+/// A 2-d float64 array as rows, with `cols` columns when given (any number of rows).
+pub fn matrix(
+    param: &str,
+    array: &Bound<'_, PyAny>,
+    cols: Option<usize>,
+) -> Result<Vec<Vec<f64>>, Error> {
+    let array: PyReadonlyArray2<f64> = array
+        .extract()
+        .map_err(|_| shape_error(param, "a 2-d float64 array", describe(array)))?;
+    let shape = array.shape();
+    if let Some(cols) = cols {
+        if shape[1] != cols {
+            return Err(shape_error(
+                param,
+                &format!("shape (steps, {cols})"),
+                format!("shape ({}, {})", shape[0], shape[1]),
+            ));
+        }
+    }
+    Ok(array
+        .as_array()
+        .rows()
+        .into_iter()
+        .map(|r| r.to_vec())
+        .collect())
+}
+
 /// A 1-d int64 array.
 pub fn indices(param: &str, array: &Bound<'_, PyAny>) -> Result<Vec<i64>, Error> {
     let array: PyReadonlyArray1<i64> = array
@@ -124,4 +151,56 @@ pub fn faces_to_numpy<'py>(py: Python<'py>, faces: &[[usize; 3]]) -> Bound<'py, 
     PyArray1::from_vec(py, flat)
         .reshape([faces.len(), 3])
         .expect("3 k values")
+}
+
+/// A cable description: a dict with "points" ((k, 3) float64, m), "stiffness" (N/m),
+/// "actuation", and optionally "transition", "anchor_first", "snap_tolerance" (m),
+/// "outside" ("error" | "free") and "free_node_mass" (kg).
+pub fn cable_spec(
+    index: usize,
+    item: &Bound<'_, PyAny>,
+) -> Result<sorofem_core::cables::CableSpec, Error> {
+    use sorofem_core::cables::{CableSpec, Outside};
+    let name = |key: &str| format!("cables[{index}].{key}");
+    let get = |key: &str| -> Option<Bound<'_, PyAny>> { item.get_item(key).ok() };
+    let float = |key: &str, default: Option<f64>| -> Result<f64, Error> {
+        match get(key) {
+            Some(v) => v
+                .extract::<f64>()
+                .map_err(|_| Error::shape(&name(key), "a number", v.to_string())),
+            None => default.ok_or_else(|| Error::invalid(&name(key), "a value", "nothing")),
+        }
+    };
+    let points_obj = get("points")
+        .ok_or_else(|| Error::invalid(&name("points"), "a (k, 3) array of points", "nothing"))?;
+    let mut spec = CableSpec::new(
+        points(&name("points"), &points_obj)?,
+        float("stiffness", None)?,
+        float("actuation", Some(1.0))?,
+    );
+    spec.transition = float("transition", Some(spec.transition))?;
+    spec.snap_tolerance = float("snap_tolerance", Some(0.0))?;
+    spec.free_node_mass = float("free_node_mass", Some(0.0))?;
+    if let Some(v) = get("anchor_first") {
+        spec.anchor_first = v
+            .extract::<bool>()
+            .map_err(|_| Error::shape(&name("anchor_first"), "a bool", v.to_string()))?;
+    }
+    if let Some(v) = get("outside") {
+        let text: String = v
+            .extract()
+            .map_err(|_| Error::shape(&name("outside"), "\"error\" or \"free\"", v.to_string()))?;
+        spec.outside = match text.as_str() {
+            "error" => Outside::Error,
+            "free" => Outside::FreeNode,
+            other => {
+                return Err(Error::invalid(
+                    &name("outside"),
+                    "\"error\" or \"free\"",
+                    format!("{other:?}"),
+                ))
+            }
+        };
+    }
+    Ok(spec)
 }

@@ -5,9 +5,9 @@ mod convert;
 mod errors;
 
 use errors::{report_to_dict, IntoPyResult};
-use numpy::{PyArray1, PyArray2};
+use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyList};
 use sorofem_core::material::Volumetric;
 use sorofem_core::{
     Formulation, Loads, Material, Orientation, PressureMass, SolveOptions, TetMesh,
@@ -114,6 +114,39 @@ fn boundary_faces<'py>(
     Ok(convert::faces_to_numpy(py, &mesh.boundary_faces()))
 }
 
+/// Loads from numpy: gravity (3,), nodal forces (n, 3), prescribed displacements (k, 3).
+fn loads_from(
+    py: Python<'_>,
+    n: usize,
+    gravity: &Bound<'_, PyAny>,
+    forces: &Bound<'_, PyAny>,
+    prescribed: &Bound<'_, PyAny>,
+) -> PyResult<Loads> {
+    let gravity = convert::vec3("gravity", gravity).py(py)?;
+    let forces = convert::points("forces", forces).py(py)?;
+    if forces.len() != n {
+        return Err(errors::to_py(
+            py,
+            sorofem_core::Error::shape(
+                "forces",
+                format!("({n}, 3)"),
+                format!("({}, 3)", forces.len()),
+            ),
+        ));
+    }
+    let nodal_forces = forces
+        .into_iter()
+        .enumerate()
+        .filter(|(_, f)| f.iter().any(|&v| v != 0.0))
+        .collect();
+    let prescribed = convert::points("prescribed", prescribed).py(py)?;
+    Ok(Loads {
+        gravity,
+        nodal_forces,
+        prescribed,
+    })
+}
+
 /// A body ready to be solved many times (see sorofem.model.Body, which owns one).
 #[pyclass(module = "sorofem._core")]
 struct Model {
@@ -123,7 +156,7 @@ struct Model {
 #[pymethods]
 impl Model {
     #[new]
-    #[pyo3(signature = (points, tets, fixed, formulation = "standard", options = None))]
+    #[pyo3(signature = (points, tets, fixed, formulation = "standard", options = None, cables = None))]
     fn new(
         py: Python<'_>,
         points: &Bound<'_, PyAny>,
@@ -131,7 +164,17 @@ impl Model {
         fixed: &Bound<'_, PyAny>,
         formulation: &str,
         options: Option<&Bound<'_, PyDict>>,
+        cables: Option<&Bound<'_, PyList>>,
     ) -> PyResult<Self> {
+        let cable_specs = match cables {
+            Some(list) => list
+                .iter()
+                .enumerate()
+                .map(|(c, item)| convert::cable_spec(c, &item))
+                .collect::<Result<Vec<_>, _>>()
+                .py(py)?,
+            None => Vec::new(),
+        };
         let (mesh, _) = build_mesh(py, points, tets, Orientation::Reject)?;
         let fixed = convert::indices("fixed", fixed).py(py)?;
         let option = |key: &str| -> PyResult<Option<String>> {
@@ -184,7 +227,15 @@ impl Model {
         };
         let mesh = Arc::new(mesh);
         let inner = py
-            .detach(|| sorofem_core::Model::try_new(mesh, &fixed, formulation, volumetric))
+            .detach(|| {
+                sorofem_core::Model::try_new_with_cables(
+                    mesh,
+                    &fixed,
+                    formulation,
+                    volumetric,
+                    &cable_specs,
+                )
+            })
             .py(py)?;
         Ok(Model { inner })
     }
@@ -223,35 +274,13 @@ impl Model {
         load_steps: usize,
     ) -> PyResult<Bound<'py, PyDict>> {
         let n = self.inner.mesh().n_nodes();
-        let gravity = convert::vec3("gravity", gravity).py(py)?;
-        let forces = convert::points("forces", forces).py(py)?;
-        if forces.len() != n {
-            return Err(errors::to_py(
-                py,
-                sorofem_core::Error::shape(
-                    "forces",
-                    format!("({n}, 3)"),
-                    format!("({}, 3)", forces.len()),
-                ),
-            ));
-        }
-        let nodal_forces = forces
-            .into_iter()
-            .enumerate()
-            .filter(|(_, f)| f.iter().any(|&v| v != 0.0))
-            .collect();
-        let prescribed = convert::points("prescribed", prescribed).py(py)?;
+        let loads = loads_from(py, n, gravity, forces, prescribed)?;
         let initial = initial
             .filter(|i| !i.is_none())
             .map(|i| convert::points("initial", i))
             .transpose()
             .py(py)?;
         let initial_flat: Option<Vec<f64>> = initial.map(|p| p.into_iter().flatten().collect());
-        let loads = Loads {
-            gravity,
-            nodal_forces,
-            prescribed,
-        };
         let options = SolveOptions {
             tolerance,
             max_iterations,
@@ -278,6 +307,96 @@ impl Model {
         Ok(out)
     }
 
+    /// Implicit Euler dynamics; returns a dict with "times", "positions" (frames, n, 3),
+    /// "velocities" (n, 3), "cable_points", "kinetic_energy", "iterations", "cutbacks".
+    #[pyo3(signature = (gravity, forces, prescribed, dt, steps, actuation, mass_damping = 0.0, stiffness_damping = 0.0, initial_positions = None, initial_velocities = None, tolerance = 1e-8, max_iterations = 50, save_every = 1))]
+    #[allow(clippy::too_many_arguments)]
+    fn simulate<'py>(
+        &mut self,
+        py: Python<'py>,
+        gravity: &Bound<'py, PyAny>,
+        forces: &Bound<'py, PyAny>,
+        prescribed: &Bound<'py, PyAny>,
+        dt: f64,
+        steps: usize,
+        actuation: &Bound<'py, PyAny>,
+        mass_damping: f64,
+        stiffness_damping: f64,
+        initial_positions: Option<&Bound<'py, PyAny>>,
+        initial_velocities: Option<&Bound<'py, PyAny>>,
+        tolerance: f64,
+        max_iterations: usize,
+        save_every: usize,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let n = self.inner.mesh().n_nodes();
+        let loads = loads_from(py, n, gravity, forces, prescribed)?;
+        let actuation =
+            convert::matrix("actuation", actuation, Some(self.inner.n_cables())).py(py)?;
+        let flat = |param: &str, a: Option<&Bound<'py, PyAny>>| -> PyResult<Option<Vec<f64>>> {
+            a.filter(|a| !a.is_none())
+                .map(|a| convert::points(param, a).map(|p| p.into_iter().flatten().collect()))
+                .transpose()
+                .py(py)
+        };
+        let x0 = flat("initial_positions", initial_positions)?;
+        let v0 = flat("initial_velocities", initial_velocities)?;
+        let options = SolveOptions {
+            tolerance,
+            max_iterations,
+            ..Default::default()
+        };
+        let damping = sorofem_core::Damping {
+            mass: mass_damping,
+            stiffness: stiffness_damping,
+        };
+        let inner = &mut self.inner;
+        let trajectory = py
+            .detach(|| {
+                inner.simulate(
+                    &loads,
+                    dt,
+                    steps,
+                    &actuation,
+                    damping,
+                    x0.as_deref(),
+                    v0.as_deref(),
+                    &options,
+                    save_every,
+                )
+            })
+            .py(py)?;
+        let out = PyDict::new(py);
+        out.set_item("times", PyArray1::from_slice(py, &trajectory.times))?;
+        let frames = trajectory.positions.len();
+        let flat_positions: Vec<f64> = trajectory.positions.into_iter().flatten().collect();
+        out.set_item(
+            "positions",
+            PyArray1::from_vec(py, flat_positions).reshape([frames, n, 3])?,
+        )?;
+        out.set_item(
+            "velocities",
+            convert::points_to_numpy(py, &trajectory.velocities),
+        )?;
+        let cable_points: Vec<Vec<_>> = trajectory
+            .cable_points
+            .iter()
+            .map(|frame| {
+                frame
+                    .iter()
+                    .map(|c| convert::points_to_numpy(py, c.as_flattened()))
+                    .collect()
+            })
+            .collect();
+        out.set_item("cable_points", cable_points)?;
+        out.set_item(
+            "kinetic_energy",
+            PyArray1::from_slice(py, &trajectory.kinetic_energy),
+        )?;
+        out.set_item("iterations", trajectory.iterations)?;
+        out.set_item("cutbacks", trajectory.cutbacks)?;
+        Ok(out)
+    }
+
     /// Per-tet J and von Mises stress (Pa) at positions (n, 3).
     fn element_fields<'py>(
         &self,
@@ -299,6 +418,43 @@ impl Model {
     #[getter]
     fn n_free(&self) -> usize {
         self.inner.n_free()
+    }
+
+    /// Sets cable `cable`'s actuation alpha (1 = rest, < 1 = pulled).
+    fn set_actuation(&mut self, py: Python<'_>, cable: usize, actuation: f64) -> PyResult<()> {
+        self.inner.set_actuation(cable, actuation).py(py)
+    }
+
+    /// Sets cable `cable`'s segment stiffness (N/m).
+    fn set_cable_stiffness(
+        &mut self,
+        py: Python<'_>,
+        cable: usize,
+        stiffness: f64,
+    ) -> PyResult<()> {
+        self.inner.set_cable_stiffness(cable, stiffness).py(py)
+    }
+
+    /// Where each cable point was placed: per cable, a list of
+    /// ("embedded", tet, distance) | ("free", index, 0.0) | ("anchor", -1, 0.0).
+    fn cable_placements(&self) -> Vec<Vec<(String, i64, f64)>> {
+        use sorofem_core::cables::PointPlacement;
+        self.inner
+            .cable_placements()
+            .iter()
+            .map(|cable| {
+                cable
+                    .iter()
+                    .map(|p| match *p {
+                        PointPlacement::Embedded { tet, distance } => {
+                            ("embedded".to_string(), tet as i64, distance)
+                        }
+                        PointPlacement::Free { index } => ("free".to_string(), index as i64, 0.0),
+                        PointPlacement::Anchor => ("anchor".to_string(), -1, 0.0),
+                    })
+                    .collect()
+            })
+            .collect()
     }
 }
 
