@@ -20,6 +20,7 @@ pub mod material;
 pub mod mesh;
 pub mod model;
 pub mod newton;
+pub mod sensitivity;
 
 pub use error::{Error, Result};
 pub use mesh::{Orientation, TetMesh};

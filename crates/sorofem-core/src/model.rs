@@ -56,23 +56,27 @@ pub struct Solution {
 }
 
 pub struct Model {
-    mesh: Arc<TetMesh>,
-    fixed_nodes: Vec<usize>,
-    formulation: Formulation,
-    elastic: ElasticTerm,
-    cables: CableTerm,
-    placements: Vec<Vec<PointPlacement>>,
+    pub(crate) mesh: Arc<TetMesh>,
+    pub(crate) fixed_nodes: Vec<usize>,
+    pub(crate) formulation: Formulation,
+    pub(crate) elastic: ElasticTerm,
+    pub(crate) cables: CableTerm,
+    pub(crate) placements: Vec<Vec<PointPlacement>>,
     /// Rest position (m) and mass (kg) of each free cable node.
-    free_nodes: Vec<([f64; 3], f64)>,
-    density: Vec<f64>,
-    assembler: Assembler,
-    factor: SparseFactor,
+    pub(crate) free_nodes: Vec<([f64; 3], f64)>,
+    pub(crate) density: Vec<f64>,
+    pub(crate) assembler: Assembler,
+    pub(crate) factor: SparseFactor,
     /// Weight (Pa/m) of the volume-constraint residual rows (m^3) in the mixed residual norm,
     /// so that they are measured in N like the force rows: `mean(mu) / mean edge length`.
-    pressure_weight: f64,
+    pub(crate) pressure_weight: f64,
     /// Free-node displacements and pressures of the last solve: a warm start's starting guess.
-    last_extra: Option<Vec<f64>>,
-    material_set: bool,
+    pub(crate) last_extra: Option<Vec<f64>>,
+    pub(crate) material_set: bool,
+    /// Full DOF vector and loads of the last static solve (what sensitivities differentiate).
+    pub(crate) last_state: Option<(Vec<f64>, Loads)>,
+    /// The factorisation holds the Hessian at `last_state` (not a Newton iterate's).
+    pub(crate) factor_at_solution: bool,
 }
 
 impl Model {
@@ -172,6 +176,8 @@ impl Model {
             pressure_weight: 1.0,
             last_extra: None,
             material_set: false,
+            last_state: None,
+            factor_at_solution: false,
         })
     }
 
@@ -222,6 +228,7 @@ impl Model {
             ));
         }
         target.actuation = actuation;
+        self.factor_at_solution = false;
         Ok(())
     }
 
@@ -246,11 +253,12 @@ impl Model {
             ));
         }
         target.stiffness = stiffness;
+        self.factor_at_solution = false;
         Ok(())
     }
 
     /// The terms whose sum is the internal energy, in the assembler's order.
-    fn terms(&self) -> [&dyn Term; 2] {
+    pub(crate) fn terms(&self) -> [&dyn Term; 2] {
         [&self.elastic, &self.cables]
     }
 
@@ -316,6 +324,7 @@ impl Model {
             self.pressure_weight = mean_mu / mean_edge;
         }
         self.material_set = true;
+        self.factor_at_solution = false;
         Ok(())
     }
 
@@ -406,6 +415,8 @@ impl Model {
             .iter()
             .map(|&i| std::array::from_fn(|k| internal[3 * i + k] - full_load[3 * i + k]))
             .collect();
+        self.last_state = Some((z.clone(), loads.clone()));
+        self.factor_at_solution = false;
         let n_displacement = 3 * n + 3 * self.free_nodes.len();
         let pressure = matches!(self.formulation, Formulation::Mixed { .. })
             .then(|| z[n_displacement..].to_vec());
@@ -472,7 +483,7 @@ impl Model {
 
     /// Lumped mass (kg) of every full DOF: `rho V / 4` per tet and node, free cable nodes' own
     /// masses, zero for pressures.
-    fn lumped_mass(&self) -> Vec<f64> {
+    pub(crate) fn lumped_mass(&self) -> Vec<f64> {
         let n = self.mesh.n_nodes();
         let mut mass = vec![0.0; self.assembler.n_full()];
         for (e, tet) in self.mesh.tets().iter().enumerate() {
@@ -721,6 +732,8 @@ impl Model {
         }
         trajectory.velocities = v_nodes;
         self.last_extra = Some(z[3 * n..].to_vec());
+        self.last_state = None;
+        self.factor_at_solution = false;
         Ok(trajectory)
     }
 

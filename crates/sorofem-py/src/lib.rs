@@ -147,6 +147,26 @@ fn loads_from(
     })
 }
 
+fn param_vector_to_dict<'py>(
+    py: Python<'py>,
+    p: &sorofem_core::sensitivity::ParamVector,
+) -> PyResult<Bound<'py, PyDict>> {
+    let out = PyDict::new(py);
+    out.set_item("mu", PyArray1::from_slice(py, &p.mu))?;
+    out.set_item("lam", PyArray1::from_slice(py, &p.lambda))?;
+    out.set_item("rho", PyArray1::from_slice(py, &p.density))?;
+    out.set_item("gravity", PyArray1::from_slice(py, &p.gravity))?;
+    out.set_item(
+        "cable_actuation",
+        PyArray1::from_slice(py, &p.cable_actuation),
+    )?;
+    out.set_item(
+        "cable_stiffness",
+        PyArray1::from_slice(py, &p.cable_stiffness),
+    )?;
+    Ok(out)
+}
+
 /// A body ready to be solved many times (see sorofem.model.Body, which owns one).
 #[pyclass(module = "sorofem._core")]
 struct Model {
@@ -394,6 +414,70 @@ impl Model {
         )?;
         out.set_item("iterations", trajectory.iterations)?;
         out.set_item("cutbacks", trajectory.cutbacks)?;
+        Ok(out)
+    }
+
+    /// Adjoint gradient of a scalar objective of the last equilibrium's node positions:
+    /// `d_objective_d_positions` (n, 3) -> dict of dO/dtheta ("mu", "lam", "rho" per tet,
+    /// "gravity" (3,), "cable_actuation", "cable_stiffness" per cable).
+    fn adjoint<'py>(
+        &mut self,
+        py: Python<'py>,
+        d_objective_d_positions: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let g: Vec<f64> = convert::points("d_objective_d_positions", d_objective_d_positions)
+            .py(py)?
+            .into_iter()
+            .flatten()
+            .collect();
+        let inner = &mut self.inner;
+        let gradient = py.detach(|| inner.adjoint(&g)).py(py)?;
+        param_vector_to_dict(py, &gradient)
+    }
+
+    /// Forward sensitivity along a parameter direction (dict with any of the adjoint's keys):
+    /// returns {"dx": (n, 3), "dp": (n,) or None}.
+    fn forward<'py>(
+        &mut self,
+        py: Python<'py>,
+        direction: &Bound<'py, PyDict>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let m = self.inner.mesh().n_tets();
+        let c = self.inner.n_cables();
+        let mut delta = sorofem_core::sensitivity::ParamVector::zeros(m, c);
+        for (key, value) in direction.iter() {
+            let key: String = key.extract()?;
+            let target: &mut Vec<f64> =
+                match key.as_str() {
+                    "mu" => &mut delta.mu,
+                    "lam" => &mut delta.lambda,
+                    "rho" => &mut delta.density,
+                    "cable_actuation" => &mut delta.cable_actuation,
+                    "cable_stiffness" => &mut delta.cable_stiffness,
+                    "gravity" => {
+                        delta.gravity = convert::vec3("direction[\"gravity\"]", &value).py(py)?;
+                        continue;
+                    }
+                    other => return Err(errors::to_py(
+                        py,
+                        sorofem_core::Error::invalid(
+                            "direction",
+                            "keys among mu, lam, rho, gravity, cable_actuation, cable_stiffness",
+                            format!("{other:?}"),
+                        ),
+                    )),
+                };
+            let len = target.len();
+            *target = convert::vector(&format!("direction[{key:?}]"), &value, Some(len)).py(py)?;
+        }
+        let inner = &mut self.inner;
+        let (dx, dp) = py.detach(|| inner.forward(&delta)).py(py)?;
+        let out = PyDict::new(py);
+        out.set_item("dx", convert::points_to_numpy(py, &dx))?;
+        match dp {
+            Some(p) => out.set_item("dp", PyArray1::from_vec(py, p))?,
+            None => out.set_item("dp", py.None())?,
+        }
         Ok(out)
     }
 

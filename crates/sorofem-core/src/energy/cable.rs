@@ -206,3 +206,56 @@ impl Term for CableTerm {
         stiffness * psi
     }
 }
+
+impl CableTerm {
+    /// Cable index of element (segment) `e`.
+    pub fn cable_of(&self, e: usize) -> usize {
+        self.segments[e].0
+    }
+
+    /// Derivatives of segment `e`'s gradient (local DOFs `z`, length 24) with respect to its
+    /// cable's actuation alpha and stiffness k: `-k psi''(s) l (dL/dz)` and `psi'(s) (dL/dz)`.
+    pub fn segment_param_derivatives(
+        &self,
+        e: usize,
+        z: &[f64],
+        d_actuation: &mut [f64],
+        d_stiffness: &mut [f64],
+    ) {
+        let (c, k) = self.segments[e];
+        let cable = &self.cables[c];
+        let stiffness = cable.stiffness;
+        // The gradient is linear in k, so d(grad)/dk = grad / k.
+        self.element(e, z, Some(d_stiffness), None, HessianMode::Exact);
+        d_stiffness.iter_mut().for_each(|v| *v /= stiffness);
+        let (_, weights) = self.endpoint_maps(e);
+        let mut y = [
+            Vector3::from(cable.points[k].offset),
+            Vector3::from(cable.points[k + 1].offset),
+        ];
+        for end in 0..2 {
+            for slot in 0..8 {
+                let w = weights[end * 8 + slot];
+                if w != 0.0 {
+                    y[end] += w * Vector3::new(z[3 * slot], z[3 * slot + 1], z[3 * slot + 2]);
+                }
+            }
+        }
+        let d = y[1] - y[0];
+        let length = d.norm();
+        let rest = cable.rest_lengths[k];
+        let (_, _, d2psi) = unilateral(length - cable.actuation * rest, cable.transition * rest);
+        let n = if length > 0.0 {
+            d / length
+        } else {
+            Vector3::zeros()
+        };
+        let f = -stiffness * d2psi * rest * n;
+        for slot in 0..8 {
+            let coefficient = weights[8 + slot] - weights[slot];
+            for i in 0..3 {
+                d_actuation[3 * slot + i] = coefficient * f[i];
+            }
+        }
+    }
+}

@@ -278,3 +278,43 @@ impl Term for PressureCompliance<'_> {
         0.5 * (0..4).map(|a| p[a] * cp[a]).sum::<f64>()
     }
 }
+
+impl ElasticTerm {
+    /// Parameter derivatives of element `e`'s gradient at local DOFs `z`: writes
+    /// `d(grad_e)/d(mu_e)` and `d(grad_e)/d(lambda_e)` (each of length `stencil_size()`).
+    ///
+    /// Standard: `V (F - F^{-T}) g_a` and `V c c' J F^{-T} g_a`. Mixed: the shear part gives the
+    /// same mu-derivative on the displacement rows, while lambda only enters the compliance
+    /// `C_e = M_e / lambda`, so `d(grad_p)/d(lambda) = C_e p / lambda` and nothing on the
+    /// displacement rows (differentiating `lambda/2 c^2` there instead is the classic mistake).
+    pub fn element_param_derivatives(
+        &self,
+        e: usize,
+        z: &[f64],
+        d_mu: &mut [f64],
+        d_lambda: &mut [f64],
+    ) {
+        d_mu.fill(0.0);
+        d_lambda.fill(0.0);
+        let h = self.displacement_gradient(e, z);
+        let f = crate::material::Mat3::identity() + h;
+        let Some([dp_dmu, dp_dlambda]) = self.material(e).stress_param_gradient(&f) else {
+            return;
+        };
+        let volume = self.mesh.volumes()[e];
+        let g = self.mesh.shape_gradients(e);
+        add_tet_gradient(volume, g, &dp_dmu, &mut d_mu[..12]);
+        match self.formulation {
+            Formulation::Standard => add_tet_gradient(volume, g, &dp_dlambda, &mut d_lambda[..12]),
+            Formulation::Mixed { mass, .. } => {
+                let p = &z[12..16];
+                for a in 0..4 {
+                    d_lambda[12 + a] = (0..4)
+                        .map(|b| self.compliance(e, a, b, mass) * p[b])
+                        .sum::<f64>()
+                        / self.lambda[e];
+                }
+            }
+        }
+    }
+}

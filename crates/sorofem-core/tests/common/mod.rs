@@ -83,11 +83,11 @@ pub fn check_directional(
     x0: &[f64],
     v: &[f64],
     h: f64,
-    f: impl Fn(&[f64]) -> f64,
+    mut f: impl FnMut(&[f64]) -> f64,
     analytic: f64,
     rtol: f64,
 ) {
-    let at = |e: f64| -> f64 {
+    let mut at = |e: f64| -> f64 {
         let x: Vec<f64> = x0.iter().zip(v).map(|(a, b)| a + e * b).collect();
         f(&x)
     };
