@@ -12,7 +12,7 @@
 //! Eliminating p (`C p = phi`) gives back `W_mu + 1/2 phi^T C^{-1} phi`, which tends to the standard
 //! energy as the mesh is refined, so both formulations solve the same continuum model.
 
-use super::{add_tet_gradient, add_tet_hessian, HessianMode, Term};
+use super::{add_isotropic_tet_hessian, add_tet_gradient, add_tet_hessian, HessianMode, Term};
 use crate::material::{project_to_psd, volumetric_tangent, NeoHookean, Tangent, Volumetric};
 use crate::mesh::TetMesh;
 use std::sync::Arc;
@@ -91,9 +91,11 @@ impl ElasticTerm {
         mode: HessianMode,
     ) -> f64 {
         let h = self.displacement_gradient(e, z);
+        // The general 9x9 tangent is only needed to project it.
+        let need_tangent = hess.is_some() && mode == HessianMode::Projected;
         let Some(r) = self
             .material(e)
-            .response_from_displacement_gradient(&h, hess.is_some())
+            .response_from_displacement_gradient(&h, need_tangent)
         else {
             return f64::INFINITY;
         };
@@ -105,13 +107,27 @@ impl ElasticTerm {
         }
         if let Some(hess) = hess {
             hess.fill(0.0);
-            let tangent = r.tangent.expect("tangent requested");
-            let tangent = if mode == HessianMode::Projected {
-                project_to_psd(&tangent)
-            } else {
-                tangent
-            };
-            add_tet_hessian(volume, g, &tangent, hess, 12);
+            match mode {
+                HessianMode::Projected => {
+                    let tangent = r.tangent.expect("tangent requested");
+                    add_tet_hessian(volume, g, &project_to_psd(&tangent), hess, 12);
+                }
+                HessianMode::Exact => {
+                    let material = self.material(e);
+                    let Some((gt, j)) = crate::material::inverse_transpose(
+                        &(crate::material::Mat3::identity() + h),
+                    ) else {
+                        return f64::INFINITY;
+                    };
+                    let (c, dc, d2c) = material
+                        .volumetric
+                        .measure_near_one(crate::material::neo_hookean::j_minus_one(&h));
+                    let dh = material.lambda * c * dc;
+                    let d2h = material.lambda * (dc * dc + c * d2c);
+                    let (alpha, beta) = (material.mu - dh * j, d2h * j * j + dh * j);
+                    add_isotropic_tet_hessian(volume, g, &gt, material.mu, alpha, beta, hess, 12);
+                }
+            }
         }
         volume * r.energy
     }
@@ -128,7 +144,7 @@ impl ElasticTerm {
         let h = self.displacement_gradient(e, z);
         let Some(shear) = self
             .material(e)
-            .shear_from_displacement_gradient(&h, hess.is_some())
+            .shear_from_displacement_gradient(&h, hess.is_some() && mode == HessianMode::Projected)
         else {
             return f64::INFINITY;
         };
@@ -163,14 +179,27 @@ impl ElasticTerm {
         }
         if let Some(hess) = hess {
             hess.fill(0.0);
-            let tangent: Tangent = shear.tangent.expect("tangent requested")
-                + volumetric_tangent(&gt, j, q * dc, q * d2c);
-            let tangent = if mode == HessianMode::Projected {
-                project_to_psd(&tangent)
-            } else {
-                tangent
-            };
-            add_tet_hessian(volume, g, &tangent, hess, 16);
+            let (dh, d2h) = (q * dc, q * d2c);
+            match mode {
+                HessianMode::Projected => {
+                    let tangent: Tangent = shear.tangent.expect("tangent requested")
+                        + volumetric_tangent(&gt, j, dh, d2h);
+                    add_tet_hessian(volume, g, &project_to_psd(&tangent), hess, 16);
+                }
+                HessianMode::Exact => {
+                    let mu = self.mu[e];
+                    add_isotropic_tet_hessian(
+                        volume,
+                        g,
+                        &gt,
+                        mu,
+                        mu - dh * j,
+                        d2h * j * j + dh * j,
+                        hess,
+                        16,
+                    );
+                }
+            }
             for b in 0..4 {
                 let coupling = dvol_stress * g[b] * (0.25 * volume);
                 for i in 0..3 {
