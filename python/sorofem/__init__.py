@@ -13,7 +13,9 @@ Examples
 
 from importlib.metadata import PackageNotFoundError, version as _version
 
-from . import errors, io, plot
+from . import cables, dynamics, errors, io, plot
+from .cables import Cable, actuate
+from .dynamics import Trajectory, simulate
 from .errors import (
     ConvergenceError,
     InputError,
@@ -41,6 +43,10 @@ __all__ = [
     "StaticResult",
     "SolveReport",
     "Scene",
+    "Cable",
+    "actuate",
+    "simulate",
+    "Trajectory",
     "SorofemError",
     "InputError",
     "ShapeError",
@@ -49,6 +55,8 @@ __all__ = [
     "SceneError",
     "SolverError",
     "ConvergenceError",
+    "cables",
+    "dynamics",
     "errors",
     "io",
     "plot",

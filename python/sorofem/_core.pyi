@@ -35,6 +35,26 @@ class _Report(TypedDict):
 class _SolveOutput(_Report):
     positions: _F  # (n, 3)
     pressure: _F | None  # (n,) for mixed formulations, else None
+    reactions: _F  # (n_fixed, 3), N
+
+class _Cable(TypedDict, total=False):
+    points: _F  # (k, 3), m; required
+    stiffness: float  # N/m per segment; required
+    actuation: float  # alpha > 0, default 1
+    transition: float  # fraction of the segment rest length, default 1e-3
+    anchor_first: bool  # default False
+    snap_tolerance: float  # m, default 0
+    outside: str  # "error" (default) | "free"
+    free_node_mass: float  # kg, default 0
+
+class _Trajectory(TypedDict):
+    times: _F  # (frames,), s
+    positions: _F  # (frames, n, 3), m
+    velocities: _F  # (n, 3) final, m/s
+    cable_points: list[list[_F]]  # per frame, per cable (k, 3)
+    kinetic_energy: _F  # (frames,), J
+    iterations: list[int]  # Newton iterations per step
+    cutbacks: int
 
 class _ElementFields(TypedDict):
     J: _F  # (m,)
@@ -67,6 +87,7 @@ class Model:
         fixed: _I,
         formulation: str = "standard",
         options: dict[str, Any] | None = None,
+        cables: list[_Cable] | None = None,
     ) -> None:
         """formulation "standard" | "mixed"; options: "volumetric" ("log": c = ln J, default |
         "linear": c = J - 1; both formulations), "pressure_mass" ("consistent", default |
@@ -93,3 +114,28 @@ class Model:
         Raises ConvergenceError whose `.report` is a _Report."""
     def element_fields(self, positions: _F) -> _ElementFields:
         """Per-element J and von Mises stress at the given positions (n, 3)."""
+    def set_actuation(self, cable: int, actuation: float) -> None:
+        """Cable `cable`'s alpha (> 0; 1 = rest, < 1 = pulled)."""
+    def set_cable_stiffness(self, cable: int, stiffness: float) -> None:
+        """Cable `cable`'s segment stiffness, N/m (> 0)."""
+    def cable_placements(self) -> list[list[tuple[str, int, float]]]:
+        """Per cable and point: ("embedded", tet, distance m) | ("free", index, 0.0) | ("anchor", -1, 0.0)."""
+    def simulate(
+        self,
+        gravity: _F,
+        forces: _F,
+        prescribed: _F,
+        dt: float,
+        steps: int,
+        actuation: _F,
+        mass_damping: float = 0.0,
+        stiffness_damping: float = 0.0,
+        initial_positions: _F | None = None,
+        initial_velocities: _F | None = None,
+        tolerance: float = 1e-8,
+        max_iterations: int = 50,
+        save_every: int = 1,
+    ) -> _Trajectory:
+        """Implicit Euler with lumped mass and Rayleigh damping (alpha_M 1/s, beta_K s);
+        actuation (steps, n_cables) alphas per step. Raises ConvergenceError when a step fails
+        even after halving it six times."""

@@ -4,6 +4,8 @@ Usage::
 
     sorofem run SCENE.toml --out DIR [--quiet] [--json]
     sorofem info MESH [--scale S] [--json]
+    sorofem convert IN OUT [--scale S] [--quiet]
+    sorofem view SCENE.toml [--port P] [--host H]
     sorofem --version
 
 ``run`` writes ``DIR/result.vtu``, ``DIR/summary.json``, ``DIR/shape.png`` and
@@ -11,7 +13,13 @@ Usage::
 ``summary.json`` records, besides the solver report, the volume bookkeeping
 ``volume_change`` ((V_deformed - V_rest) / V_rest) and ``mean_log_j`` (sum V_e ln J_e / V),
 and for ``kind = "mixed"`` the pressure range ``min_pressure``/``max_pressure`` (Pa); the
-pressure field itself is the point data ``pressure`` of ``result.vtu``.
+pressure field itself is the point data ``pressure`` of ``result.vtu``. With ``[[cable]]``
+entries, ``run`` also writes ``DIR/cables.vtu`` (the cables as lines, with tension) and
+``summary.json`` gets ``cables``: per cable its actuation, segment tensions and where each point
+was placed. A scene with ``[dynamics]`` is integrated in time instead: ``run`` writes
+``DIR/trajectory.pvd`` with the frames in ``DIR/trajectory/``, ``DIR/trajectory.png`` (displacement
+and kinetic energy against time) and ``DIR/summary.json`` (steps, Newton iterations, cutbacks,
+energies, final cable tensions).
 
 Exit codes: 0 success; 2 bad input (scene, mesh or arguments: one ``error: ...`` line on
 stderr); 3 the solver failed (``summary.json`` is still written, with
@@ -43,6 +51,10 @@ __all__ = ["main"]
 
 EXIT_OK, EXIT_UNEXPECTED, EXIT_INPUT, EXIT_SOLVER = 0, 1, 2, 3
 OUTPUT_NAMES = ("result.vtu", "summary.json", "shape.png", "convergence.png")
+#: Written besides OUTPUT_NAMES when the scene has cables.
+CABLE_OUTPUT_NAMES = ("cables.vtu",)
+#: Written instead of OUTPUT_NAMES for a scene with [dynamics] (trajectory/ holds the frames).
+DYNAMICS_OUTPUT_NAMES = ("trajectory.pvd", "trajectory", "summary.json", "trajectory.png")
 #: Radius ratio below which a tet counts as bad in `sorofem info` (1 = regular tet).
 BAD_QUALITY = 0.1
 
@@ -80,6 +92,17 @@ def _build_parser() -> argparse.ArgumentParser:
     info.add_argument("mesh", type=Path, help="mesh file (.tet or any format meshio reads)")
     info.add_argument("--scale", type=float, default=1.0, help="coordinate scale factor (default 1)")
     info.add_argument("--json", action="store_true", help="print as JSON")
+
+    convert = sub.add_parser("convert", help="convert a mesh file to another format (see sorofem.convert)")
+    convert.add_argument("input", type=Path, metavar="IN", help="mesh file (.tet or any format meshio reads)")
+    convert.add_argument("output", type=Path, metavar="OUT", help="output file; its suffix picks the format")
+    convert.add_argument("--scale", type=float, default=1.0, help="coordinate scale factor (default 1)")
+    convert.add_argument("--quiet", action="store_true", help="print nothing on success")
+
+    view = sub.add_parser("view", help="interactive 3-D view in the browser (needs sorofem[viewer])")
+    view.add_argument("scene", type=Path, help="TOML scene file")
+    view.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
+    view.add_argument("--port", type=int, default=8080, help="port (default 8080)")
     return parser
 
 
@@ -89,6 +112,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = _build_parser().parse_args(argv)
         if args.command == "run":
             return _run(args)
+        if args.command == "convert":
+            from .convert import _cli as _convert
+
+            return _convert(args.input, args.output, args.scale, quiet=args.quiet)
+        if args.command == "view":
+            from .viewer import _cli as _view
+
+            return _view(args.scene, host=args.host, port=args.port)
         return _info(args)
     except (_UsageError, InputError, FileNotFoundError, NotADirectoryError, IsADirectoryError,
             PermissionError) as exc:
@@ -152,7 +183,11 @@ def _run(args: argparse.Namespace) -> int:
     out: Path = args.out
     if out.exists() and not out.is_dir():
         raise InputError(f"--out: {out} exists and is not a folder")
-    outputs = {name: out / name for name in OUTPUT_NAMES}
+    if scene.dynamics is not None:
+        names = DYNAMICS_OUTPUT_NAMES
+    else:
+        names = OUTPUT_NAMES + (CABLE_OUTPUT_NAMES if scene.cables else ())
+    outputs = {name: out / name for name in names}
     protected = [p for p in (scene.path, scene.mesh.source) if p is not None]
     for target in outputs.values():
         for source in protected:
@@ -170,6 +205,8 @@ def _run(args: argparse.Namespace) -> int:
         "gravity": scene.gravity.tolist(),
         "solver_options": dict(scene.solver),
     }
+    if scene.dynamics is not None:
+        return _run_dynamics(args, scene, outputs, base)
     try:
         result = scene.solve()
     except SolverError as exc:
@@ -197,6 +234,10 @@ def _run(args: argparse.Namespace) -> int:
 
     summary = {**base, **result.to_dict()}
     write_result(outputs["result.vtu"], result)
+    if scene.cables:
+        from .cables import write_cables
+
+        write_cables(outputs["cables.vtu"], result)
     text = _write_json(outputs["summary.json"], summary)
     plot_rest_and_deformed(result, outputs["shape.png"], title=f"{scene.path.name}: max |u| = {result.max_displacement:.3g} m")
     plot_convergence(result.report, outputs["convergence.png"], tolerance=scene.solver["tolerance"])
@@ -213,7 +254,51 @@ def _run(args: argparse.Namespace) -> int:
         print(f"volume change {result.volume_change:.3e}, mean ln J {result.mean_log_j:.3e}")
         if result.pressure is not None:
             print(f"pressure {result.pressure.min():.4g} .. {result.pressure.max():.4g} Pa")
-        print(f"wrote {', '.join(OUTPUT_NAMES)} to {out}")
+        for c, tension in enumerate(result.cable_tensions):
+            print(f"cable {c}: alpha {result.actuations[c]:g}, tension {tension.min():.4g} .. {tension.max():.4g} N")
+        print(f"wrote {', '.join(outputs)} to {out}")
+    return EXIT_OK
+
+
+def _run_dynamics(args: argparse.Namespace, scene: Any, outputs: dict[str, Path], base: dict[str, Any]) -> int:
+    """``run`` for a scene with ``[dynamics]``: trajectory.pvd + frames, summary.json, trajectory.png."""
+    from .cables import placement_counts
+    from .plot import plot_trajectory
+
+    base = {**base, "dynamics": scene.to_dict()["dynamics"]}
+    if scene.cables:
+        base["cables"] = [
+            {"rest_length": c.length, "stiffness": c.stiffness, "placements": [p.kind for p in placements],
+             "placement_counts": placement_counts(placements)}
+            for c, placements in zip(scene.cables, scene.body.cable_placements())
+        ]
+    try:
+        trajectory = scene.simulate()
+    except SolverError as exc:
+        summary = {**base, "converged": False, "error": str(exc)}
+        text = _write_json(outputs["summary.json"], summary)
+        if args.json:
+            sys.stdout.write(text)
+        print(f"error: solver failed: {_one_line(exc)} (report in {outputs['summary.json']})", file=sys.stderr)
+        return EXIT_SOLVER
+    trajectory.write_pvd(outputs["trajectory.pvd"].parent, "trajectory")
+    summary = {**base, "converged": True, **trajectory.to_dict()}
+    for entry, tension, points in zip(summary.get("cables", []), trajectory.cable_tensions(-1), trajectory.cable_points[-1]):
+        entry["final_tensions"] = tension.tolist()
+        entry["final_points"] = points.tolist()
+    text = _write_json(outputs["summary.json"], summary)
+    plot_trajectory(trajectory, outputs["trajectory.png"])
+    if args.json:
+        sys.stdout.write(text)
+    elif not args.quiet:
+        print(f"{scene.path.name}: {scene.mesh.n_nodes} nodes, {scene.mesh.n_tets} tets, {scene.formulation}, "
+              f"{len(scene.cables)} cable(s)")
+        print(f"{summary['steps']} steps of {summary['dt']:g} s: {summary['newton_iterations']} Newton iterations "
+              f"(max {summary['max_iterations_per_step']} per step), {summary['cutbacks']} cutbacks, "
+              f"{summary['timings']['simulate']:.3g} s")
+        print(f"final kinetic energy {summary['final_kinetic_energy']:.3e} J (max {summary['max_kinetic_energy']:.3e} J), "
+              f"max displacement {summary['max_displacement']:.6g} m")
+        print(f"wrote {', '.join(outputs)} ({trajectory.n_frames} frames) to {outputs['summary.json'].parent}")
     return EXIT_OK
 
 

@@ -139,12 +139,22 @@ def _read_tet(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _read_meshio(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    import contextlib
+    import io as _io
+
     import meshio
 
+    # meshio prints the error of every reader it tries (for .msh: ANSYS before Gmsh) to stdout,
+    # which would corrupt `sorofem info --json`; keep that text for the error message instead.
+    tried = _io.StringIO()
     try:
-        m = meshio.read(path)
+        with contextlib.redirect_stdout(tried):
+            m = meshio.read(path)
     except Exception as exc:  # meshio raises many types (ReadError, KeyError, ...)
-        raise MeshError(f"{path}: could not read the mesh with meshio: {exc}") from None
+        detail = " ".join(tried.getvalue().split())
+        raise MeshError(
+            f"{path}: could not read the mesh with meshio: {exc}" + (f" ({detail})" if detail else "")
+        ) from None
     blocks = [np.asarray(c.data, dtype=np.int64) for c in m.cells if c.type == "tetra"]
     if not blocks:
         found = sorted({c.type for c in m.cells}) or ["none"]

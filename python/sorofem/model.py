@@ -731,6 +731,9 @@ class Body:
         self._forces = np.zeros((mesh.n_nodes, 3), dtype=np.float64)
         self._model: Any = None
         self._model_fixed: NDArray[np.int64] | None = None
+        self._cables: list[Any] = []  # sorofem.Cable
+        self._actuations: list[float] = []
+        self._model_n_cables = 0
 
     def fix(self, nodes: ArrayLike, displacement: ArrayLike | None = None) -> None:
         """Fix nodes, optionally at a prescribed displacement.
@@ -771,6 +774,63 @@ class Body:
         f = _vector_per_node(force, "force", idx.size)
         np.add.at(self._forces, idx, f)
 
+    def add_cable(self, cable: Any) -> int:
+        """Add a :class:`sorofem.Cable`; returns its index. The model is rebuilt at the next
+        solve (points are located in the mesh then; see :meth:`cable_placements`).
+
+        Examples
+        --------
+        >>> import sorofem as sf
+        >>> mesh = sf.Mesh.box(size=(0.4, 0.1, 0.1), cells=(8, 2, 2))
+        >>> body = sf.Body(mesh, sf.NeoHookean(youngs_modulus=66e3, poisson_ratio=0.45))
+        >>> body.add_cable(sf.Cable.line((0, 0.05, 0.01), (1, 0, 0), 0.4, 10, stiffness=1e5))
+        0
+        """
+        from .cables import Cable
+
+        if not isinstance(cable, Cable):
+            raise InputError(f"cable: expected a sorofem.Cable, got {_describe(cable)}")
+        if any(c is cable for c in self._cables):
+            raise InputError("cable: this Cable has already been added to the body")
+        self._cables.append(cable)
+        self._actuations.append(cable.actuation)
+        return len(self._cables) - 1
+
+    def set_actuation(self, cable: Any, alpha: float) -> None:
+        """Set the actuation alpha (> 0; 1 = rest length, < 1 = pulled) of a cable, given as
+        the :class:`sorofem.Cable` or its index. Takes effect at the next solve without
+        rebuilding the model."""
+        from .cables import cable_index, check_actuation
+
+        index = cable_index(self, cable)
+        alpha = check_actuation(alpha, "alpha")
+        self._actuations[index] = alpha
+        if self._model is not None and self._model_n_cables == len(self._cables):
+            self._model.set_actuation(index, alpha)
+
+    @property
+    def cables(self) -> tuple[Any, ...]:
+        """The cables added to the body, in index order."""
+        return tuple(self._cables)
+
+    @property
+    def actuations(self) -> list[float]:
+        """Current actuation alpha of each cable."""
+        return list(self._actuations)
+
+    def cable_placements(self) -> list[list[Any]]:
+        """Where each cable point ended up: per cable, one :class:`sorofem.cables.CablePlacement`
+        per point (``kind`` "embedded", "snapped", "free" or "anchor").
+
+        Raises
+        ------
+        ParameterError
+            A point lies outside the mesh and its cable has ``outside="error"``.
+        """
+        from .cables import CablePlacement
+
+        return [[CablePlacement.from_core(p) for p in cable] for cable in self._core_model().cable_placements()]
+
     @property
     def fixed_nodes(self) -> NDArray[np.int64]:
         """Sorted indices of the fixed nodes, ``(k,)``."""
@@ -798,12 +858,19 @@ class Body:
     def _core_model(self) -> Any:
         """The extension's Model, rebuilt only when the fixed set changes: building it
         analyses the sparsity pattern, which is worth reusing across solves."""
-        if self._model is None or not np.array_equal(self._model_fixed, self._fixed):
+        if (
+            self._model is None
+            or not np.array_equal(self._model_fixed, self._fixed)
+            or self._model_n_cables != len(self._cables)
+        ):
             core = _core_module()
+            cables = [c.to_core(alpha) for c, alpha in zip(self._cables, self._actuations)]
             self._model = core.Model(
-                self.mesh.points, self.mesh.tets, self._fixed.copy(), self.formulation, self.formulation_options
+                self.mesh.points, self.mesh.tets, self._fixed.copy(), self.formulation, self.formulation_options,
+                cables=cables or None,
             )
             self._model_fixed = self._fixed.copy()
+            self._model_n_cables = len(self._cables)
         return self._model
 
     def __repr__(self) -> str:
@@ -937,8 +1004,16 @@ class StaticResult:
         pressure: NDArray[np.float64] | None,
         report: SolveReport,
         reactions: NDArray[np.float64] | None = None,
+        cable_points: Sequence[ArrayLike] | None = None,
+        cable_tensions: Sequence[ArrayLike] | None = None,
     ) -> None:
         self.body = body
+        #: Current position of every cable point, one ``(k, 3)`` array per cable (m).
+        self.cable_points = [np.asarray(p, dtype=np.float64).reshape(-1, 3) for p in cable_points or []]
+        #: Tension of every cable segment, one ``(k - 1,)`` array per cable (N, >= 0).
+        self.cable_tensions = [np.asarray(t, dtype=np.float64).reshape(-1) for t in cable_tensions or []]
+        #: The actuation alpha of each cable at this solve.
+        self.actuations = body.actuations
         #: Support reactions ``(n_fixed, 3)`` in N, one row per entry of ``body.fixed_nodes``:
         #: the force each support exerts on the body (they balance the applied loads).
         self.reactions = None if reactions is None else np.asarray(reactions, dtype=np.float64)
@@ -1016,7 +1091,30 @@ class StaticResult:
             "min_pressure": None if self.pressure is None else float(self.pressure.min()),
             "max_pressure": None if self.pressure is None else float(self.pressure.max()),
             "max_von_mises": float(self.von_mises.max()),
+            **self._cables_dict(),
             "report": self.report.to_dict(),
+        }
+
+    def _cables_dict(self) -> dict[str, Any]:
+        """``{"cables": [...]}`` (tensions, actuation, point placements) when the body has cables."""
+        if not self.body.cables:
+            return {}
+        from .cables import placement_counts
+
+        placements = self.body.cable_placements()
+        return {
+            "cables": [
+                {
+                    "actuation": alpha,
+                    "stiffness": cable.stiffness,
+                    "rest_length": cable.length,
+                    "tensions": self.cable_tensions[c].tolist() if c < len(self.cable_tensions) else None,
+                    "max_tension": float(self.cable_tensions[c].max()) if c < len(self.cable_tensions) else None,
+                    "placements": [p.kind for p in placements[c]],
+                    "placement_counts": placement_counts(placements[c]),
+                }
+                for c, (cable, alpha) in enumerate(zip(self.body.cables, self.actuations))
+            ]
         }
 
     def __repr__(self) -> str:
@@ -1095,4 +1193,12 @@ def solve_static(
             err.report = SolveReport.from_dict(err.report)
         raise
     report = SolveReport.from_dict(out)
-    return StaticResult(body, out["positions"], out.get("pressure"), report, reactions=out.get("reactions"))
+    cable_points, cable_tensions = out.get("cable_points"), out.get("cable_tensions")
+    if body.cables and cable_points is None:  # an extension that does not return them yet
+        from .cables import cable_state
+
+        cable_points, cable_tensions = cable_state(body, out["positions"])
+    return StaticResult(
+        body, out["positions"], out.get("pressure"), report, reactions=out.get("reactions"),
+        cable_points=cable_points, cable_tensions=cable_tensions,
+    )

@@ -23,9 +23,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
+    from .dynamics import Trajectory
     from .model import SolveReport, StaticResult
 
-__all__ = ["plot_rest_and_deformed", "plot_convergence"]
+__all__ = ["plot_rest_and_deformed", "plot_convergence", "plot_trajectory"]
 
 
 def _new_figure(figsize: tuple[float, float]):  # -> Figure
@@ -60,7 +61,8 @@ def plot_rest_and_deformed(
     path: str | os.PathLike[str],
     title: str | None = None,
 ) -> None:
-    """Rest shape (grey wireframe) and deformed surface coloured by ``|u|``, as a PNG.
+    """Rest shape (grey wireframe) and deformed surface coloured by ``|u|``, as a PNG; the
+    body's cables, if any, in red (rest shape dashed).
 
     Axes share one scale so shapes are not distorted; the colour bar is in metres.
 
@@ -97,6 +99,16 @@ def plot_rest_and_deformed(
         deformed[faces], facecolors=_shaded(cmap(norm(face_value)), deformed[faces]), edgecolors="none"
     )
     ax.add_collection3d(surface)
+
+    cable_points = getattr(result, "cable_points", None) or []
+    if cable_points:
+        # Cables run inside the body: draw them on top of the surface, rest dashed.
+        ax.computed_zorder = False
+        for c, (cable, points) in enumerate(zip(result.body.cables, cable_points)):
+            label = "cables (rest dashed)" if c == 0 else None
+            ax.plot(*cable.points.T, color="tab:red", linestyle="--", linewidth=0.8, alpha=0.6, zorder=10)
+            ax.plot(*points.T, color="tab:red", marker="o", markersize=2.5, linewidth=1.6, zorder=11, label=label)
+        ax.legend(loc="upper left")
 
     both = np.vstack([rest, deformed])
     lo, hi = both.min(axis=0), both.max(axis=0)
@@ -157,5 +169,42 @@ def plot_convergence(
     status = "converged" if report.converged else "not converged"
     ax.set_title(f"Newton: {status} after {report.iterations} iterations")
     ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(os.fspath(path))
+
+
+def plot_trajectory(trajectory: "Trajectory", path: str | os.PathLike[str], title: str | None = None) -> None:
+    """Largest displacement and kinetic energy (log scale) against time, as a PNG.
+
+    Parameters
+    ----------
+    trajectory
+        A :class:`~sorofem.Trajectory`.
+    path
+        Output PNG file.
+    title
+        Figure title; default: steps, time step and Newton iterations.
+    """
+    fig = _new_figure((6.5, 5.0))
+    ax, ax_e = fig.add_subplot(2, 1, 1), fig.add_subplot(2, 1, 2, sharex=None)
+    t = trajectory.times
+    ax.plot(t, np.linalg.norm(trajectory.displacement, axis=2).max(axis=1))
+    ax.set_ylabel("max |u| [m]")
+    ax.grid(True, alpha=0.3)
+    energy = np.asarray(trajectory.kinetic_energy)
+    positive = energy > 0
+    if np.any(positive):
+        ax_e.semilogy(t[positive], energy[positive])
+    else:
+        ax_e.set_yscale("log")
+        ax_e.text(0.5, 0.5, "at rest throughout", ha="center", va="center", transform=ax_e.transAxes)
+    ax_e.set_xlabel("time [s]")
+    ax_e.set_ylabel("kinetic energy [J]")
+    ax_e.grid(True, which="both", alpha=0.3)
+    steps = int(trajectory.iterations.size)
+    ax.set_title(title if title is not None else (
+        f"{steps} steps of {trajectory.dt:g} s, {int(trajectory.iterations.sum())} Newton iterations, "
+        f"{trajectory.cutbacks} cutbacks"
+    ))
     fig.tight_layout()
     fig.savefig(os.fspath(path))

@@ -33,6 +33,30 @@ Schema
     max_iterations = 50
     load_steps = 1
 
+    [[cable]]                  # optional, any number; a straight line ...
+    start = [0, 0.01, 0.01]    # m
+    direction = [1, 0, 0]      # any non-zero length
+    length = 0.4               # m
+    divisions = 10             # segments
+    # points = [[0, 0.01, 0.01], [0.2, 0.01, 0.01], [0.4, 0.01, 0.01]]   # ... or explicit points
+    stiffness = 1e5            # N/m per segment (required)
+    actuation = 0.8            # alpha > 0: 1 = rest length, < 1 = pulled (default 1)
+    transition = 1e-3          # slack-taut transition width / segment rest length, in (0, 1)
+    anchor_first = false       # first point fixed in the world (the motor)
+    snap_tolerance = 0.0       # m: points this far outside the mesh attach to the nearest tet
+    outside = "error"          # or "free": points farther out become free nodes
+    free_node_mass = 0.0       # kg per free node
+
+    [dynamics]                 # optional: integrate in time instead of a static solve
+    dt = 0.01                  # s
+    steps = 200
+    mass_damping = 0.0         # Rayleigh alpha_M, 1/s
+    stiffness_damping = 0.0    # Rayleigh beta_K, s
+    save_every = 1             # frames written every this many steps
+    initial = "rest"           # or "static": start from the static equilibrium (loads, actuations)
+    actuation = [[[0.0, 1.0], [0.5, 0.8]]]   # per cable: [time, alpha] keyframes, linear, held
+                               # outside; default: every cable keeps its `actuation`
+
 Validation is strict: an unknown key, a wrong type, a missing mesh file, a ``[[fixed]]``
 entry selecting no node or an out-of-range value raises :class:`~sorofem.SceneError`
 with the file, the dotted key (e.g. ``fixed[0].box.min``) and, when it can be found, the
@@ -57,6 +81,8 @@ from typing import Any
 
 import numpy as np
 
+from .cables import OUTSIDE_MODES, Cable
+from .dynamics import Keyframes, Trajectory, simulate
 from .errors import InputError, ParameterError, SceneError
 from .io import read_mesh
 from .model import (
@@ -72,7 +98,14 @@ from .model import (
 
 __all__ = ["Scene"]
 
-_TOP_KEYS = ("mesh", "material", "formulation", "fixed", "loads", "solver")
+_TOP_KEYS = ("mesh", "material", "formulation", "fixed", "loads", "solver", "cable", "dynamics")
+_CABLE_KEYS = (
+    "points", "start", "direction", "length", "divisions", "stiffness", "actuation", "transition",
+    "anchor_first", "snap_tolerance", "outside", "free_node_mass",
+)
+_DYNAMICS_DEFAULTS: dict[str, Any] = {
+    "mass_damping": 0.0, "stiffness_damping": 0.0, "save_every": 1, "initial": "rest", "actuation": None,
+}
 _MATERIAL_KEYS = ("youngs_modulus", "poisson_ratio", "shear_modulus", "lame_lambda", "density")
 _SOLVER_DEFAULTS: dict[str, Any] = {"tolerance": 1e-8, "max_iterations": 50, "load_steps": 1}
 _FORMULATION_DEFAULTS: dict[str, str] = {"kind": "standard", "volumetric": "log", "pressure_mass": "consistent"}
@@ -233,6 +266,11 @@ class Scene:
     formulation_options: dict[str, str] = field(
         default_factory=lambda: {k: v for k, v in _FORMULATION_DEFAULTS.items() if k != "kind"}
     )
+    #: The ``[[cable]]`` entries, added to ``body`` (see :class:`sorofem.Cable`).
+    cables: list[Cable] = field(default_factory=list)
+    #: ``[dynamics]`` with defaults filled in (``actuation``: a list of
+    #: :class:`sorofem.dynamics.Keyframes` per cable, or None), or None for a static scene.
+    dynamics: dict[str, Any] | None = None
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> "Scene":
@@ -282,6 +320,8 @@ class Scene:
         _apply_fixed(check, data["fixed"], body)
         gravity = _apply_loads(check, data.get("loads", {}), body)
         solver = _build_solver(check, data.get("solver", {}))
+        cables = _apply_cables(check, data.get("cable", []), body)
+        dynamics = _build_dynamics(check, data["dynamics"], body) if "dynamics" in data else None
         return cls(
             path=path,
             mesh=mesh,
@@ -291,11 +331,32 @@ class Scene:
             gravity=gravity,
             solver=solver,
             formulation_options=options,
+            cables=cables,
+            dynamics=dynamics,
         )
 
     def solve(self) -> StaticResult:
         """Run :func:`sorofem.solve_static` with the scene's loads and solver options."""
         return solve_static(self.body, self.gravity, **self.solver)
+
+    def simulate(self) -> Trajectory:
+        """Run :func:`sorofem.simulate` with the scene's ``[dynamics]`` (from the rest shape,
+        or from :meth:`solve`'s equilibrium with ``initial = "static"``).
+
+        Raises
+        ------
+        InputError
+            The scene has no ``[dynamics]`` table.
+        """
+        if self.dynamics is None:
+            raise InputError(f"{self.path}: the scene has no [dynamics] table")
+        d = self.dynamics
+        initial = self.solve() if d["initial"] == "static" else None
+        return simulate(
+            self.body, d["dt"], d["steps"], actuation=d["actuation"], gravity=self.gravity,
+            damping=(d["mass_damping"], d["stiffness_damping"]), initial=initial, save_every=d["save_every"],
+            tolerance=self.solver["tolerance"], max_iterations=self.solver["max_iterations"],
+        )
 
     def to_dict(self) -> dict[str, Any]:
         """Plain summary of the scene's settings."""
@@ -308,6 +369,13 @@ class Scene:
             "gravity": self.gravity.tolist(),
             "fixed_nodes": int(self.body.fixed_nodes.size),
             "solver": dict(self.solver),
+            "cables": [c.to_dict() for c in self.cables],
+            "dynamics": None if self.dynamics is None else {
+                **self.dynamics,
+                "actuation": None if self.dynamics["actuation"] is None else [
+                    np.column_stack([k.times, k.values]).tolist() for k in self.dynamics["actuation"]
+                ],
+            },
         }
 
 
@@ -456,4 +524,107 @@ def _build_solver(check: _Checker, raw: Any) -> dict[str, Any]:
     for name in ("max_iterations", "load_steps"):
         if name in table:
             options[name] = check.integer(table[name], f"solver.{name}", 1)
+    return options
+
+
+def _apply_cables(check: _Checker, raw: Any, body: Body) -> list[Cable]:
+    """Build each ``[[cable]]`` entry, add it to ``body`` and locate its points in the mesh."""
+    if isinstance(raw, dict):
+        raise check.error("cable", "expected an array of tables: write [[cable]], not [cable]")
+    if not isinstance(raw, list):
+        raise check.error("cable", f"expected an array of tables ([[cable]]), got {_type_name(raw)}")
+    cables = []
+    for i, entry in enumerate(raw):
+        prefix = f"cable[{i}]"
+        entry = check.table(entry, prefix)
+        check.keys(entry, _CABLE_KEYS, prefix)
+        if "stiffness" not in entry:
+            raise check.error(f"{prefix}.stiffness", "missing: the stiffness of each segment, N/m")
+        line_keys = ("start", "direction", "length", "divisions")
+        if ("points" in entry) == any(k in entry for k in line_keys):
+            raise check.error(prefix, "expected exactly one of 'points' or 'start' + 'direction' + 'length' + 'divisions'")
+        options: dict[str, Any] = {}
+        for name in ("stiffness", "actuation", "transition", "snap_tolerance", "free_node_mass"):
+            if name in entry:
+                options[name] = check.number(entry[name], f"{prefix}.{name}")
+        if "anchor_first" in entry:
+            if not isinstance(entry["anchor_first"], bool):
+                raise check.error(f"{prefix}.anchor_first", f"expected true or false, got {_type_name(entry['anchor_first'])}")
+            options["anchor_first"] = entry["anchor_first"]
+        if "outside" in entry:
+            outside = check.string(entry["outside"], f"{prefix}.outside")
+            if outside not in OUTSIDE_MODES:
+                raise check.error(f"{prefix}.outside", f"expected one of {', '.join(repr(m) for m in OUTSIDE_MODES)}, got {outside!r}")
+            options["outside"] = outside
+        try:
+            if "points" in entry:
+                points = entry["points"]
+                if not isinstance(points, list) or len(points) < 2:
+                    raise check.error(f"{prefix}.points", "expected an array of at least 2 points [x, y, z]")
+                cable = Cable([check.vec3(p, f"{prefix}.points") for p in points], **options)
+            else:
+                for name in line_keys:
+                    if name not in entry:
+                        raise check.error(f"{prefix}.{name}", "missing (a straight cable needs start, direction, length and divisions)")
+                cable = Cable.line(
+                    check.vec3(entry["start"], f"{prefix}.start"),
+                    check.vec3(entry["direction"], f"{prefix}.direction"),
+                    check.number(entry["length"], f"{prefix}.length", minimum=0.0),
+                    check.integer(entry["divisions"], f"{prefix}.divisions", 1),
+                    **options,
+                )
+        except ParameterError as exc:
+            name = exc.parameter or "points"
+            raise check.error(f"{prefix}.{name}", str(exc).removeprefix(f"{name}: ")) from None
+        body.add_cable(cable)
+        cables.append(cable)
+    if cables:
+        try:
+            body.cable_placements()
+        except ParameterError as exc:
+            match = re.search(r"cables\[(\d+)\]\.(\w+)", str(exc))
+            key = f"cable[{match.group(1)}].{match.group(2)}" if match else "cable"
+            raise check.error(key, f"could not place the cable in the mesh: {exc}") from None
+    return cables
+
+
+def _build_dynamics(check: _Checker, raw: Any, body: Body) -> dict[str, Any]:
+    table = check.table(raw, "dynamics")
+    check.keys(table, ("dt", "steps", *_DYNAMICS_DEFAULTS), "dynamics")
+    for required in ("dt", "steps"):
+        if required not in table:
+            raise check.error(f"dynamics.{required}", "missing")
+    options = dict(_DYNAMICS_DEFAULTS)
+    options["dt"] = check.number(table["dt"], "dynamics.dt", minimum=0.0)
+    options["steps"] = check.integer(table["steps"], "dynamics.steps", 1)
+    for name in ("mass_damping", "stiffness_damping"):
+        if name in table:
+            options[name] = check.number(table[name], f"dynamics.{name}", minimum=0.0, strict=False)
+    if "save_every" in table:
+        options["save_every"] = check.integer(table["save_every"], "dynamics.save_every", 1)
+    if "initial" in table:
+        initial = check.string(table["initial"], "dynamics.initial")
+        if initial not in ("rest", "static"):
+            raise check.error("dynamics.initial", f"expected 'rest' or 'static', got {initial!r}")
+        options["initial"] = initial
+    if "actuation" in table:
+        raw_schedule = table["actuation"]
+        n_cables = len(body.cables)
+        if not isinstance(raw_schedule, list) or len(raw_schedule) != n_cables:
+            shown = f"{len(raw_schedule)} entries" if isinstance(raw_schedule, list) else _type_name(raw_schedule)
+            raise check.error(
+                "dynamics.actuation",
+                f"expected one list of [time, alpha] keyframes per [[cable]] ({n_cables}), got {shown}",
+            )
+        schedule = []
+        for c, frames in enumerate(raw_schedule):
+            key = f"dynamics.actuation[{c}]"
+            if not isinstance(frames, list) or not frames or not all(isinstance(f, list) and len(f) == 2 for f in frames):
+                raise check.error(key, "expected a non-empty array of [time, alpha] pairs")
+            values = [[check.number(t, key), check.number(a, key, minimum=0.0)] for t, a in frames]
+            try:
+                schedule.append(Keyframes(values))
+            except InputError as exc:
+                raise check.error(key, str(exc)) from None
+        options["actuation"] = schedule
     return options

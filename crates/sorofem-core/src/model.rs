@@ -504,8 +504,9 @@ impl Model {
     /// `1/2 |u - u_n - h v_n|_M^2 / h^2 + 1/2 |u - u_n|_D^2 / h + Pi(u)` (lumped mass M,
     /// Rayleigh damping `D = alpha_M M + beta_K K_n`), then `v = (u - u_n) / h`. A step whose
     /// Newton solve fails is split in two, up to six times. `actuation[s][c]` is cable c's
-    /// alpha during step s. Starts from `initial_positions` (3 n, m; default rest) at rest or with
-    /// `initial_velocities` (3 n, m/s).
+    /// alpha during step s. Starts from `initial_positions` (3 n, m; default rest; free cable nodes
+    /// and pressures then continue from the last solve) at rest or with `initial_velocities`
+    /// (3 n, m/s).
     #[allow(clippy::too_many_arguments)]
     pub fn simulate(
         &mut self,
@@ -566,6 +567,10 @@ impl Model {
             check_finite("initial_positions", x)?;
             for i in 0..3 * n {
                 z[i] = x[i] - rest[i];
+            }
+            // Continuing from a previous state: free cable nodes and pressures too.
+            if let Some(extra) = &self.last_extra {
+                z[3 * n..].copy_from_slice(extra);
             }
         }
         let free: Vec<usize> = self.assembler.full_of_free().to_vec();

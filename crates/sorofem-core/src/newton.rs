@@ -204,7 +204,7 @@ fn newton_step(
         let Some(d) = direction else {
             return Err(Error::LinearSolver {
                 message:
-                    "the projected Hessian is singular: is the body fixed against rigid motions?"
+                    "the projected Hessian is singular: is the body fixed against rigid motions, and is every free cable node held by a taut segment (slack segments carry no stiffness)?"
                         .into(),
             });
         };

@@ -279,7 +279,8 @@ impl Model {
     }
 
     /// Static equilibrium; returns a dict with "positions", "pressure", "reactions" (one row per
-    /// fixed node, N) and the report entries.
+    /// fixed node, N), "cable_points" (per cable (k, 3), m), "cable_tensions" (per cable (k-1,),
+    /// N) and the report entries.
     #[pyo3(signature = (gravity, forces, prescribed, initial = None, tolerance = 1e-8, max_iterations = 50, load_steps = 1))]
     #[allow(clippy::too_many_arguments)]
     fn solve<'py>(
@@ -320,6 +321,18 @@ impl Model {
             "reactions",
             convert::points_to_numpy(py, solution.reactions.as_flattened()),
         )?;
+        let cable_points: Vec<_> = solution
+            .cable_points
+            .iter()
+            .map(|c| convert::points_to_numpy(py, c.as_flattened()))
+            .collect();
+        out.set_item("cable_points", cable_points)?;
+        let tensions: Vec<_> = solution
+            .cable_tensions
+            .iter()
+            .map(|t| PyArray1::from_slice(py, t))
+            .collect();
+        out.set_item("cable_tensions", tensions)?;
         match solution.pressure {
             Some(p) => out.set_item("pressure", PyArray1::from_vec(py, p))?,
             None => out.set_item("pressure", py.None())?,

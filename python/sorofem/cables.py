@@ -1,0 +1,563 @@
+"""Cables: actuated tendons routed through a body, and quasi-static actuation.
+
+A cable is an ordered chain of points. Each point is embedded in the tetrahedron that
+contains it (it moves with the material, barycentrically), snapped onto the nearest
+tetrahedron if it lies within ``snap_tolerance`` outside the mesh, turned into a free node
+with its own mass (``outside="free"``), or fixed in the world (the first point, with
+``anchor_first=True``: the motor). Consecutive points are joined by **unilateral springs**:
+segment ``k`` of rest length ``l_k`` and current length ``L_k`` stores the energy
+``stiffness * psi(L_k - alpha l_k)``, where ``alpha`` is the **actuation** (1: rest length,
+< 1: pulled in, > 1: paid out) and ``psi`` is zero when the segment is slack and a linear
+spring when it is taut, joined smoothly over a transition of width ``w = transition * l_k``::
+
+    tension = 0                              L - alpha l <= 0        (slack)
+            = stiffness (L - alpha l)^2 / 2w 0 <= L - alpha l <= w   (transition)
+            = stiffness (L - alpha l - w/2)  L - alpha l >= w        (taut)
+
+A cable pushes nothing: it only pulls its points towards each other. The points are bonded
+to the material (no sliding), so a cable's tension may vary from segment to segment.
+
+Examples
+--------
+>>> import sorofem as sf
+>>> mesh = sf.Mesh.box(size=(0.4, 0.1, 0.1), cells=(8, 2, 2))
+>>> body = sf.Body(mesh, sf.NeoHookean(youngs_modulus=66e3, poisson_ratio=0.45, density=1080))
+>>> body.fix(mesh.nodes_on_plane((0, 0, 0), (1, 0, 0)))
+>>> cable = sf.Cable.line(start=(0, 0.05, 0.01), direction=(1, 0, 0), length=0.4, divisions=10,
+...                       stiffness=1e5)
+>>> body.add_cable(cable)
+0
+>>> results = sf.actuate(body, cable, [0.9, 0.8])
+>>> [bool(r.cable_tensions[0].max() > 0) for r in results]
+[True, True]
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, NamedTuple, Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .errors import ConvergenceError, InputError, ParameterError, ShapeError
+
+if TYPE_CHECKING:
+    from .model import Body, StaticResult
+
+__all__ = ["Cable", "CablePlacement", "OUTSIDE_MODES", "actuate", "segment_tensions", "cable_state", "write_cables"]
+
+#: What to do with a cable point farther than ``snap_tolerance`` from the mesh.
+OUTSIDE_MODES: tuple[str, ...] = ("error", "free")
+
+#: Largest change of alpha per continuation step when :func:`actuate` builds the path.
+DEFAULT_ALPHA_STEP = 0.05
+#: How many times :func:`actuate` halves a failed continuation step before giving up.
+MAX_HALVINGS = 6
+
+
+def _describe(value: Any) -> str:
+    if isinstance(value, np.ndarray):
+        return f"an array of shape {value.shape} and dtype {value.dtype}"
+    return f"{type(value).__name__} {value!r}"
+
+
+def _real(value: Any, name: str, *, minimum: float, strict: bool, maximum: float | None = None) -> float:
+    """A finite real number above ``minimum`` (strictly or not) and below ``maximum`` (strictly)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise ParameterError(f"{name}: expected a number, got {_describe(value)}", name)
+    value = float(value)
+    below = value <= minimum if strict else value < minimum
+    if not math.isfinite(value) or below or (maximum is not None and value >= maximum):
+        lo = f"{'>' if strict else '>='} {minimum:g}"
+        hi = f" and < {maximum:g}" if maximum is not None else ""
+        raise ParameterError(f"{name}: expected a finite number {lo}{hi}, got {value}", name)
+    return value
+
+
+def check_actuation(alpha: Any, name: str = "actuation") -> float:
+    """Validate an actuation alpha: a finite number > 0 (1 = rest length, < 1 = pulled)."""
+    if isinstance(alpha, bool) or not isinstance(alpha, numbers.Real) or not (
+        math.isfinite(float(alpha)) and float(alpha) > 0
+    ):
+        raise ParameterError(
+            f"{name}: expected a finite number > 0 (1 = rest length, < 1 = pulled), got {_describe(alpha)}",
+            name,
+        )
+    return float(alpha)
+
+
+class Cable:
+    """A cable: a chain of unilateral springs through (or outside) a body.
+
+    Parameters
+    ----------
+    points
+        Rest positions of the cable points, ``(k, 3)`` with ``k >= 2``, m; consecutive
+        points must differ.
+    stiffness
+        Stiffness of each segment spring, N/m, > 0. (Each segment is a spring of this
+        stiffness whatever its length: a finer division makes the whole cable softer.)
+    actuation
+        Initial actuation alpha > 0: the segments' rest lengths are multiplied by it
+        (1: rest, 0.8: pulled in by 20 %). Change it later with :meth:`Body.set_actuation`.
+    transition
+        Width of the slack-to-taut transition as a fraction of each segment's rest length,
+        in (0, 1); smaller is closer to an ideal unilateral spring, larger is easier for
+        Newton.
+    anchor_first
+        Fix the first point in the world (the motor) instead of embedding it; the cable then
+        exerts an external force on the body.
+    snap_tolerance
+        Points at most this far outside the mesh (m, >= 0) are attached to the nearest
+        tetrahedron.
+    outside
+        ``"error"`` (default): a point farther outside is an error. ``"free"``: it becomes a
+        free node with its own three unknowns, mass ``free_node_mass`` and weight.
+    free_node_mass
+        Mass of each free node, kg, >= 0. A massless free node needs a taut cable on both
+        sides to be determined.
+    damping
+        Reserved for a cable dashpot; only ``None`` is supported (use Rayleigh damping in
+        :func:`sorofem.simulate`).
+
+    Raises
+    ------
+    ShapeError
+        ``points`` is not a ``(k, 3)`` numeric array.
+    ParameterError
+        Any other value out of range (the error's ``parameter`` names it).
+
+    Examples
+    --------
+    >>> import sorofem as sf
+    >>> cable = sf.Cable([[0, 0, 0], [0.1, 0, 0], [0.2, 0, 0]], stiffness=1e4)
+    >>> cable.n_segments, cable.rest_lengths.tolist()
+    (2, [0.1, 0.1])
+    """
+
+    def __init__(
+        self,
+        points: ArrayLike,
+        stiffness: float,
+        actuation: float = 1.0,
+        *,
+        transition: float = 1e-3,
+        anchor_first: bool = False,
+        snap_tolerance: float = 0.0,
+        outside: str = "error",
+        free_node_mass: float = 0.0,
+        damping: None = None,
+    ) -> None:
+        try:
+            pts = np.asarray(points, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ShapeError(f"points: expected a (k, 3) array of numbers, got {_describe(points)} ({exc})") from None
+        if pts.ndim != 2 or pts.shape[1] != 3:
+            raise ShapeError(f"points: expected shape (k, 3), got shape {pts.shape}")
+        if pts.shape[0] < 2:
+            raise ParameterError(f"points: a cable needs at least 2 points, got {pts.shape[0]}", "points")
+        if not np.all(np.isfinite(pts)):
+            row = int(np.argwhere(~np.isfinite(pts))[0, 0])
+            raise ParameterError(f"points: expected finite coordinates, got {pts[row].tolist()} at point {row}", "points")
+        lengths = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+        if np.any(lengths <= 0):
+            k = int(np.argmax(lengths <= 0))
+            raise ParameterError(
+                f"points: consecutive points must differ, but points {k} and {k + 1} coincide at {pts[k].tolist()}",
+                "points",
+            )
+        if not isinstance(anchor_first, (bool, np.bool_)):
+            raise ParameterError(f"anchor_first: expected True or False, got {_describe(anchor_first)}", "anchor_first")
+        if not isinstance(outside, str) or outside not in OUTSIDE_MODES:
+            raise ParameterError(f"outside: expected one of {list(OUTSIDE_MODES)}, got {outside!r}", "outside")
+        if damping is not None:
+            raise ParameterError(
+                "damping: per-cable damping is not supported yet; pass damping=None and use Rayleigh "
+                "damping, sf.simulate(..., damping=(alpha_M, beta_K))",
+                "damping",
+            )
+        pts.setflags(write=False)
+        lengths.setflags(write=False)
+        self._points = pts
+        self._rest_lengths = lengths
+        self.stiffness = _real(stiffness, "stiffness", minimum=0.0, strict=True)
+        self.actuation = check_actuation(actuation)
+        self.transition = _real(transition, "transition", minimum=0.0, strict=True, maximum=1.0)
+        self.anchor_first = bool(anchor_first)
+        self.snap_tolerance = _real(snap_tolerance, "snap_tolerance", minimum=0.0, strict=False)
+        self.outside = outside
+        self.free_node_mass = _real(free_node_mass, "free_node_mass", minimum=0.0, strict=False)
+        self.damping = None
+
+    @classmethod
+    def line(
+        cls,
+        start: ArrayLike,
+        direction: ArrayLike,
+        length: float,
+        divisions: int,
+        stiffness: float,
+        actuation: float = 1.0,
+        **options: Any,
+    ) -> "Cable":
+        """A straight cable of ``divisions`` equal segments (``divisions + 1`` points).
+
+        Parameters
+        ----------
+        start
+            First point, ``(3,)``, m.
+        direction
+            Direction ``(3,)``, any non-zero length (normalised here).
+        length
+            Total length, m, > 0.
+        divisions
+            Number of segments, >= 1.
+        stiffness, actuation, **options
+            As for :class:`Cable`.
+
+        Examples
+        --------
+        >>> import sorofem as sf
+        >>> cable = sf.Cable.line((0, 0.05, 0.01), (1, 0, 0), length=0.4, divisions=10, stiffness=1e5)
+        >>> cable.points.shape, round(float(cable.rest_lengths[0]), 6)
+        ((11, 3), 0.04)
+        """
+        try:
+            p0 = np.asarray(start, dtype=np.float64)
+            d = np.asarray(direction, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ShapeError(f"start, direction: expected 3 numbers each ({exc})") from None
+        if p0.shape != (3,) or not np.all(np.isfinite(p0)):
+            raise ShapeError(f"start: expected 3 finite numbers, got {_describe(start)}")
+        if d.shape != (3,) or not np.all(np.isfinite(d)) or not np.linalg.norm(d) > 0:
+            raise ParameterError(f"direction: expected a finite non-zero vector (3,), got {_describe(direction)}", "direction")
+        length = _real(length, "length", minimum=0.0, strict=True)
+        if isinstance(divisions, bool) or not isinstance(divisions, numbers.Integral) or divisions < 1:
+            raise ParameterError(f"divisions: expected an integer >= 1, got {_describe(divisions)}", "divisions")
+        t = np.linspace(0.0, length, int(divisions) + 1)
+        points = p0 + t[:, None] * (d / np.linalg.norm(d))
+        return cls(points, stiffness, actuation, **options)
+
+    # -- data -----------------------------------------------------------------------
+
+    @property
+    def points(self) -> NDArray[np.float64]:
+        """Rest positions of the points, ``(k, 3)``, m, read-only."""
+        return self._points
+
+    @property
+    def rest_lengths(self) -> NDArray[np.float64]:
+        """Rest length of each segment, ``(k - 1,)``, m (for alpha = 1)."""
+        return self._rest_lengths
+
+    @property
+    def n_points(self) -> int:
+        return int(self._points.shape[0])
+
+    @property
+    def n_segments(self) -> int:
+        return int(self._points.shape[0]) - 1
+
+    @property
+    def length(self) -> float:
+        """Total rest length, m."""
+        return float(self._rest_lengths.sum())
+
+    def to_core(self, actuation: float | None = None) -> dict[str, Any]:
+        """The dict the extension's ``Model(cables=[...])`` takes."""
+        return {
+            "points": np.ascontiguousarray(self._points),
+            "stiffness": self.stiffness,
+            "actuation": self.actuation if actuation is None else float(actuation),
+            "transition": self.transition,
+            "anchor_first": self.anchor_first,
+            "snap_tolerance": self.snap_tolerance,
+            "outside": self.outside,
+            "free_node_mass": self.free_node_mass,
+        }
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain summary (JSON types)."""
+        data = self.to_core()
+        data["points"] = self._points.tolist()
+        data["length"] = self.length
+        return data
+
+    def __repr__(self) -> str:
+        extra = ", anchor_first=True" if self.anchor_first else ""
+        extra += f", outside={self.outside!r}" if self.outside != "error" else ""
+        return (
+            f"Cable({self.n_points} points, length={self.length:.4g} m, stiffness={self.stiffness:.4g} N/m, "
+            f"actuation={self.actuation:g}{extra})"
+        )
+
+
+class CablePlacement(NamedTuple):
+    """Where one cable point ended up, from :meth:`Body.cable_placements`.
+
+    Attributes
+    ----------
+    kind
+        ``"embedded"`` (inside tetrahedron ``tet``), ``"snapped"`` (outside the mesh by
+        ``distance`` m, attached to the nearest tetrahedron ``tet``), ``"free"`` (free node
+        number ``free_index``) or ``"anchor"`` (fixed in the world).
+    tet
+        Tetrahedron index, or -1.
+    free_index
+        Free node index (counted over all cables of the body), or -1.
+    distance
+        Distance from the mesh, m (0 unless snapped).
+    """
+
+    kind: str
+    tet: int
+    free_index: int
+    distance: float
+
+    @classmethod
+    def from_core(cls, entry: tuple[str, int, float]) -> "CablePlacement":
+        kind, index, distance = entry
+        if kind == "embedded":
+            return cls("snapped" if distance > 0 else "embedded", int(index), -1, float(distance))
+        if kind == "free":
+            return cls("free", -1, int(index), 0.0)
+        return cls(str(kind), -1, -1, 0.0)
+
+
+def placement_counts(placements: Sequence[CablePlacement]) -> dict[str, Any]:
+    """``{"embedded": n, "snapped": n, "free": n, "anchor": n, "max_snap_distance": m}`` of one cable."""
+    counts: dict[str, Any] = {kind: 0 for kind in ("embedded", "snapped", "free", "anchor")}
+    for p in placements:
+        counts[p.kind] += 1
+    counts["max_snap_distance"] = max((p.distance for p in placements), default=0.0)
+    return counts
+
+
+def cable_index(body: "Body", cable: "Cable | int") -> int:
+    """Index of ``cable`` (a :class:`Cable` added to ``body``, or an index) in ``body.cables``."""
+    n = len(body.cables)
+    if isinstance(cable, Cable):
+        for i, c in enumerate(body.cables):
+            if c is cable:
+                return i
+        raise InputError("cable: this Cable has not been added to the body (use body.add_cable(cable) first)")
+    if isinstance(cable, bool) or not isinstance(cable, numbers.Integral):
+        raise InputError(f"cable: expected a Cable or an integer index, got {_describe(cable)}")
+    if not 0 <= int(cable) < n:
+        raise InputError(f"cable: index {int(cable)} out of range: the body has {n} cable(s)")
+    return int(cable)
+
+
+# ---------------------------------------------------------------------------
+# Quasi-static actuation
+
+
+def actuate(
+    body: "Body",
+    cable: "Cable | int",
+    alphas: float | Sequence[float],
+    gravity: ArrayLike = (0.0, 0.0, 0.0),
+    *,
+    max_step: float = DEFAULT_ALPHA_STEP,
+    initial: "ArrayLike | StaticResult | None" = None,
+    tolerance: float = 1e-8,
+    max_iterations: int = 50,
+) -> list["StaticResult"]:
+    """Pull (or release) a cable quasi-statically by continuation in its actuation alpha.
+
+    Each alpha of the path is solved with :func:`sorofem.solve_static`, warm-started from the
+    previous equilibrium. A step that does not converge is halved (up to
+    :data:`MAX_HALVINGS` times) and the intermediate equilibria are kept in the path.
+
+    Parameters
+    ----------
+    body
+        The body; ``cable`` must have been added to it.
+    cable
+        A :class:`Cable` of the body or its index.
+    alphas
+        The path: a sequence of alphas solved in turn, or a single target alpha, reached in
+        equal steps of at most ``max_step`` from the cable's current actuation.
+    gravity
+        ``(3,)``, m/s^2.
+    max_step
+        Largest alpha increment of a path built from a single target.
+    initial
+        Starting positions ``(n_nodes, 3)`` or a :class:`StaticResult` for the first solve
+        (default: the rest shape).
+    tolerance, max_iterations
+        Passed to :func:`sorofem.solve_static`.
+
+    Returns
+    -------
+    list of StaticResult
+        One per solved alpha (``result.actuations`` records them), the target last. The
+        body's actuation is left at the last alpha.
+
+    Raises
+    ------
+    ConvergenceError
+        A step failed even after halving; ``err.results`` holds the equilibria reached.
+
+    Examples
+    --------
+    >>> results = sf.actuate(body, cable, 0.5, gravity=(0, 0, -9.81))  # doctest: +SKIP
+    >>> results[-1].cable_tensions[0]                                  # doctest: +SKIP
+    """
+    from .model import StaticResult, solve_static
+
+    index = cable_index(body, cable)
+    if isinstance(alphas, numbers.Real) and not isinstance(alphas, bool):
+        target = check_actuation(alphas, "alphas")
+        step = _real(max_step, "max_step", minimum=0.0, strict=True)
+        start = body.actuations[index]
+        n = max(1, math.ceil(abs(target - start) / step - 1e-12))
+        path = [start + (target - start) * (i + 1) / n for i in range(n)]
+    else:
+        try:
+            path = [check_actuation(a, f"alphas[{i}]") for i, a in enumerate(alphas)]  # type: ignore[union-attr]
+        except TypeError:
+            raise ParameterError(f"alphas: expected a number or a sequence of numbers, got {_describe(alphas)}", "alphas") from None
+        if not path:
+            raise ParameterError("alphas: expected at least one alpha", "alphas")
+
+    results: list[StaticResult] = []
+    previous: Any = initial.positions if isinstance(initial, StaticResult) else initial
+    current = body.actuations[index]
+    for target in path:
+        halvings = 0
+        while True:
+            # Retry from the last equilibrium with half the increment until it converges.
+            trial = target if halvings == 0 else current + (target - current) / 2**halvings
+            body.set_actuation(index, trial)
+            try:
+                result = solve_static(
+                    body, gravity, tolerance=tolerance, max_iterations=max_iterations, initial=previous
+                )
+            except ConvergenceError as err:
+                halvings += 1
+                if halvings > MAX_HALVINGS:
+                    body.set_actuation(index, current)
+                    err.results = results  # type: ignore[attr-defined]
+                    raise ConvergenceError(
+                        f"actuate: no equilibrium at alpha = {trial:g} after halving the step from "
+                        f"alpha = {current:g} {MAX_HALVINGS} times: {err}",
+                        err.report,
+                    ) from err
+                continue
+            results.append(result)
+            previous, current = result.positions, trial
+            if trial == target:
+                break
+            halvings = max(0, halvings - 1)
+    return results
+
+
+def segment_tensions(
+    cable: Cable, points: ArrayLike, alpha: float | None = None, rest_lengths: ArrayLike | None = None
+) -> NDArray[np.float64]:
+    """Tension of each segment, ``(k - 1,)`` N, from the cable's current points ``(k, 3)``:
+    the spring law of the module docstring evaluated in NumPy (an independent check of the
+    solver's ``result.cable_tensions``). ``alpha`` defaults to ``cable.actuation``;
+    ``rest_lengths`` to ``cable.rest_lengths`` (a snapped point's segments are measured from
+    the material point it was attached to, see :func:`cable_state`).
+
+    Examples
+    --------
+    >>> import sorofem as sf
+    >>> cable = sf.Cable([[0, 0, 0], [1, 0, 0]], stiffness=10.0)
+    >>> sf.cables.segment_tensions(cable, [[0, 0, 0], [1.1, 0, 0]]).round(6).tolist()
+    [0.995]
+    """
+    y = np.asarray(points, dtype=np.float64).reshape(cable.n_points, 3)
+    alpha = cable.actuation if alpha is None else check_actuation(alpha, "alpha")
+    rest = cable.rest_lengths if rest_lengths is None else np.asarray(rest_lengths, dtype=np.float64)
+    stretch = np.linalg.norm(np.diff(y, axis=0), axis=1) - alpha * rest
+    w = cable.transition * rest
+    return cable.stiffness * np.where(
+        stretch <= 0, 0.0, np.where(stretch <= w, stretch**2 / (2 * w), stretch - w / 2)
+    )
+
+
+def _attachment_weights(mesh: Any, tet: int, point: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Barycentric weights of ``point`` in ``tet``, clamped to >= 0 and renormalised like the
+    core's locator does for snapped points (exact for points inside)."""
+    rest = mesh.points[mesh.tets[tet]]
+    w = np.linalg.solve((rest[1:] - rest[0]).T, point - rest[0])
+    w = np.maximum(np.concatenate([[1 - w.sum()], w]), 0.0)
+    return w / w.sum()
+
+
+def attached_rest_lengths(body: "Body", cable: "Cable | int") -> NDArray[np.float64]:
+    """Rest length of each segment as the solver sees it, ``(k - 1,)`` m: measured between the
+    material points the cable points are attached to (a snapped point moves onto the mesh)."""
+    index = cable_index(body, cable)
+    c = body.cables[index]
+    y0 = c.points.copy()
+    for k, place in enumerate(body.cable_placements()[index]):
+        if place.tet >= 0:
+            y0[k] = _attachment_weights(body.mesh, place.tet, c.points[k]) @ body.mesh.points[body.mesh.tets[place.tet]]
+    return np.linalg.norm(np.diff(y0, axis=0), axis=1)
+
+
+def cable_state(body: "Body", positions: ArrayLike) -> tuple[list[NDArray[np.float64]], list[NDArray[np.float64]]]:
+    """Cable points and tensions of ``body`` at node ``positions`` ``(n_nodes, 3)``, computed
+    here from the barycentric embedding (clamped like the core's locator for snapped points).
+    Free nodes are not part of ``positions``: their points (and the tensions of the segments
+    touching them) are NaN. Used when the extension does not return the cable state itself.
+    """
+    mesh = body.mesh
+    x = np.asarray(positions, dtype=np.float64)
+    all_points, all_tensions = [], []
+    for cable, alpha, placements in zip(body.cables, body.actuations, body.cable_placements()):
+        y = np.full((cable.n_points, 3), np.nan)
+        for k, place in enumerate(placements):
+            if place.kind == "anchor":
+                y[k] = cable.points[k]
+            elif place.tet >= 0:
+                y[k] = _attachment_weights(mesh, place.tet, cable.points[k]) @ x[mesh.tets[place.tet]]
+        all_points.append(y)
+        all_tensions.append(segment_tensions(cable, y, alpha, attached_rest_lengths(body, cable)))
+    return all_points, all_tensions
+
+
+# ---------------------------------------------------------------------------
+# Output
+
+
+def write_cables(path: str | os.PathLike[str], result: "StaticResult") -> None:
+    """Write a result's cables as polylines (``.vtu``/``.vtk``, through meshio) for ParaView.
+
+    Point data: ``cable`` (index). Cell data (one line cell per segment): ``tension`` (N) and
+    ``cable``.
+
+    Raises
+    ------
+    InputError
+        The result has no cables.
+    """
+    import meshio
+
+    if not result.cable_points:
+        raise InputError("write_cables: the result has no cables")
+    points = np.vstack(result.cable_points)
+    offsets = np.cumsum([0] + [len(p) for p in result.cable_points])
+    lines = np.vstack(
+        [np.column_stack([np.arange(a, b - 1), np.arange(a + 1, b)]) for a, b in zip(offsets[:-1], offsets[1:])]
+    ).astype(np.int64)
+    cable_of_point = np.repeat(np.arange(len(result.cable_points)), np.diff(offsets))
+    cable_of_line = np.repeat(np.arange(len(result.cable_points)), np.diff(offsets) - 1)
+    tension = np.concatenate(result.cable_tensions)
+    meshio.write(
+        Path(path),
+        meshio.Mesh(
+            points,
+            [("line", lines)],
+            point_data={"cable": cable_of_point.astype(np.float64)},
+            cell_data={"tension": [tension], "cable": [cable_of_line.astype(np.float64)]},
+        ),
+    )

@@ -1,0 +1,283 @@
+"""Dynamics: implicit Euler against its exact recurrence, damped settling, schedules, output."""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+
+import meshio
+import numpy as np
+import pytest
+
+import sorofem as sf
+from sorofem.dynamics import Keyframes, evaluate_schedule, has_dynamics
+
+GRAVITY = np.array([0.0, 0.0, -9.81])
+
+needs_dynamics = pytest.mark.skipif(
+    not has_dynamics(), reason="this build of sorofem._core has no Model.simulate (rebuild with `make build`)"
+)
+
+
+@pytest.fixture
+def silicone() -> sf.NeoHookean:
+    return sf.NeoHookean(youngs_modulus=66e3, poisson_ratio=0.45, density=1080)
+
+
+@pytest.fixture
+def beam(silicone) -> sf.Body:
+    mesh = sf.Mesh.box(size=(0.4, 0.1, 0.1), cells=(8, 2, 2))
+    body = sf.Body(mesh, silicone)
+    body.fix(mesh.nodes_on_plane((0, 0, 0), (1, 0, 0)))
+    return body
+
+
+def two_cables(body: sf.Body) -> tuple[sf.Cable, sf.Cable]:
+    a = sf.Cable.line((0, 0.01, 0.01), (1, 0, 0), 0.4, 4, stiffness=1e4)
+    b = sf.Cable.line((0, 0.09, 0.01), (1, 0, 0), 0.4, 4, stiffness=1e4, actuation=0.9)
+    body.add_cable(a)
+    body.add_cable(b)
+    return a, b
+
+
+# -- schedules (no extension time stepping needed) ------------------------------------
+
+
+def test_keyframes_interpolate_and_hold():
+    pull = Keyframes([[0.0, 1.0], [1.0, 0.5], [2.0, 0.5]])
+    assert pull(-1.0) == 1.0 and pull(0.5) == pytest.approx(0.75) and pull(5.0) == 0.5
+    with pytest.raises(sf.ParameterError, match="must not decrease"):
+        Keyframes([[1.0, 1.0], [0.0, 0.5]])
+    with pytest.raises(sf.ShapeError):
+        Keyframes([1.0, 0.5])
+
+
+def test_schedule_forms(beam):
+    a, b = two_cables(beam)
+    dt, steps = 0.1, 4
+    t = dt * np.arange(1, steps + 1)
+    held = evaluate_schedule(beam, None, dt, steps)
+    np.testing.assert_array_equal(held, [[1.0, 0.9]] * steps)
+    both = evaluate_schedule(beam, lambda time: [1 - time, 1.0], dt, steps)
+    np.testing.assert_allclose(both[:, 0], 1 - t)
+    per_cable = evaluate_schedule(beam, [Keyframes([[0, 1], [0.4, 0.6]]), None], dt, steps)
+    np.testing.assert_allclose(per_cable, np.column_stack([1 - t, np.full(steps, 0.9)]))
+    by_cable = evaluate_schedule(beam, {b: 0.8, 0: [0.9, 0.8, 0.7, 0.6]}, dt, steps)
+    np.testing.assert_allclose(by_cable, np.column_stack([[0.9, 0.8, 0.7, 0.6], np.full(steps, 0.8)]))
+    array = np.full((steps, 2), 0.7)
+    np.testing.assert_array_equal(evaluate_schedule(beam, array, dt, steps), array)
+
+
+def test_schedule_errors(beam):
+    two_cables(beam)
+    with pytest.raises(sf.InputError, match="needs a body with one cable"):
+        evaluate_schedule(beam, lambda t: 0.9, 0.1, 3)
+    with pytest.raises(sf.ParameterError, match="cable 1 at step 2"):
+        evaluate_schedule(beam, [1.0, lambda t: 0.9 - 3 * t], 0.1, 3)
+    with pytest.raises(sf.ShapeError, match=r"\(3, 2\)"):
+        evaluate_schedule(beam, np.ones((2, 2)), 0.1, 3)
+    with pytest.raises(sf.ShapeError, match="one entry per cable"):
+        evaluate_schedule(beam, [1.0], 0.1, 3)
+    with pytest.raises(sf.InputError, match="index 5"):
+        evaluate_schedule(beam, {5: 1.0}, 0.1, 3)
+
+
+def test_simulate_argument_errors(beam):
+    with pytest.raises(sf.ParameterError, match="dt"):
+        sf.simulate(beam, 0.0, 10)
+    with pytest.raises(sf.ParameterError, match="steps"):
+        sf.simulate(beam, 0.01, 0)
+    with pytest.raises(sf.ParameterError, match="alpha_M"):
+        sf.simulate(beam, 0.01, 10, damping=(-1.0, 0.0))
+    with pytest.raises(sf.ShapeError, match="initial"):
+        sf.simulate(beam, 0.01, 10, initial=np.zeros((3, 3)))
+    massless = sf.Body(beam.mesh, sf.NeoHookean(youngs_modulus=66e3, poisson_ratio=0.45))
+    massless.fix([0])
+    with pytest.raises(sf.ParameterError, match="density > 0"):
+        sf.simulate(massless, 0.01, 10)
+
+
+# -- time stepping -----------------------------------------------------------------------
+
+
+@needs_dynamics
+def test_free_fall_matches_the_implicit_euler_recurrence(silicone):
+    """No supports, gravity only: every node follows v_{n+1} = v_n + dt g,
+    x_{n+1} = x_n + dt v_{n+1}, i.e. x_n = x_0 + g dt^2 n (n + 1) / 2 (the body stays undeformed)."""
+    mesh = sf.Mesh.box(size=(0.1, 0.1, 0.1), cells=(2, 2, 2))
+    body = sf.Body(mesh, silicone)
+    dt, steps = 0.01, 30
+    traj = sf.simulate(body, dt, steps, gravity=GRAVITY)
+    n = np.arange(steps + 1)
+    np.testing.assert_allclose(traj.times, dt * n, rtol=0, atol=1e-12)
+    drop = GRAVITY[2] * dt**2 * n * (n + 1) / 2
+    expected = mesh.points[None] + drop[:, None, None] * np.array([0, 0, 1.0])
+    assert np.abs(traj.positions - expected).max() < 1e-10
+    np.testing.assert_allclose(traj.velocities, np.tile(GRAVITY * dt * steps, (mesh.n_nodes, 1)), atol=1e-10)
+    # First order in dt against the exact g t^2 / 2: the lag is g dt t / 2.
+    lag = traj.displacement[-1, :, 2] - GRAVITY[2] * traj.times[-1] ** 2 / 2
+    np.testing.assert_allclose(lag, GRAVITY[2] * dt * traj.times[-1] / 2, rtol=1e-8)
+    mass = 1080 * 1e-3
+    np.testing.assert_allclose(traj.kinetic_energy, 0.5 * mass * (GRAVITY[2] * dt * n) ** 2, rtol=1e-9)
+    assert list(traj.iterations) == [1] * steps and traj.cutbacks == 0
+
+
+@needs_dynamics
+def test_damped_beam_settles_to_the_static_solution(beam):
+    static = sf.solve_static(beam, gravity=GRAVITY)
+    # Near critical damping of the first bending mode (about 2 Hz).
+    traj = sf.simulate(beam, 0.02, 100, gravity=GRAVITY, damping=(10.0, 0.01), save_every=10)
+    assert traj.n_frames == 11 and traj.times[-1] == pytest.approx(2.0)
+    error = np.abs(traj.final_positions - static.positions).max() / static.max_displacement
+    assert error < 1e-3
+    assert traj.kinetic_energy[-1] < 1e-6 * traj.kinetic_energy.max()
+    assert traj.iterations.max() <= 10
+
+
+@needs_dynamics
+def test_cable_pull_then_hold_matches_the_static_pull(beam):
+    cable = sf.Cable.line((0, 0.01, 0.01), (1, 0, 0), 0.4, 10, stiffness=1e5)
+    beam.add_cable(cable)
+    pull = Keyframes([[0.0, 1.0], [0.5, 0.8]])
+    traj = sf.simulate(beam, 0.02, 100, actuation=pull, gravity=GRAVITY, damping=(10.0, 0.01), save_every=25)
+    np.testing.assert_allclose(traj.actuation[-1], [0.8])
+    assert beam.actuations == [1.0], "simulate changed the body's actuation"
+    static = sf.actuate(beam, cable, [0.9, 0.8], gravity=GRAVITY)[-1]
+    error = np.abs(traj.final_positions - static.positions).max() / static.max_displacement
+    assert error < 2e-3
+    np.testing.assert_allclose(traj.cable_points[-1][0], static.cable_points[0], atol=2e-3 * static.max_displacement)
+
+
+@needs_dynamics
+def test_free_node_with_mass_settles_below(silicone):
+    """A 0.1 kg free node on a 6 cm cable below a clamped cube swings down and settles where
+    the taut spring carries its weight: k (L - l - w/2) = m g."""
+    mesh = sf.Mesh.box(size=(0.1, 0.1, 0.1), cells=(2, 2, 2))
+    body = sf.Body(mesh, silicone)
+    body.fix(np.arange(mesh.n_nodes))
+    cable = sf.Cable([[0.05, 0.05, 0.01], [0.05, 0.05, -0.05]], 1e3, outside="free", free_node_mass=0.1)
+    body.add_cable(cable)
+    traj = sf.simulate(body, 0.005, 400, gravity=GRAVITY, damping=(5.0, 0.0), save_every=100)
+    hang = 0.06 + 0.1 * 9.81 / 1e3 + cable.transition * 0.06 / 2
+    np.testing.assert_allclose(traj.cable_points[-1][0][1], [0.05, 0.05, 0.01 - hang], atol=1e-7)
+    assert traj.cable_tensions(-1)[0][0] == pytest.approx(0.1 * 9.81, rel=1e-4)
+
+
+@needs_dynamics
+def test_continue_a_trajectory_and_body_state(beam):
+    first = sf.simulate(beam, 0.01, 10, gravity=GRAVITY)
+    second = sf.simulate(beam, 0.01, 10, gravity=GRAVITY, initial=first)
+    whole = sf.simulate(beam, 0.01, 20, gravity=GRAVITY)
+    np.testing.assert_allclose(second.final_positions, whole.final_positions, atol=1e-9)
+
+
+@needs_dynamics
+def test_write_pvd(beam, tmp_path):
+    two_cables(beam)
+    traj = sf.simulate(beam, 0.01, 4, actuation=[lambda t: 1 - t, None], gravity=GRAVITY, save_every=2)
+    pvd = traj.write_pvd(tmp_path / "out")
+    assert pvd == tmp_path / "out" / "trajectory.pvd"
+    entries = ET.parse(pvd).getroot().findall("./Collection/DataSet")
+    assert [float(e.get("timestep")) for e in entries] == pytest.approx([0.0, 0.02, 0.04])
+    frame = meshio.read(tmp_path / "out" / entries[-1].get("file"))
+    n = beam.mesh.n_nodes
+    assert frame.points.shape == (n + 10, 3)
+    np.testing.assert_allclose(frame.points[:n], traj.positions[-1])
+    assert [c.type for c in frame.cells] == ["tetra", "line"]
+    summary = traj.to_dict()
+    assert summary["steps"] == 4 and summary["frames"] == 3
+
+
+# -- scene files and the command line ------------------------------------------------
+
+
+DYNAMIC_SCENE = """\
+[mesh]
+box = { size = [0.4, 0.1, 0.1], cells = [8, 2, 2] }
+
+[material]
+youngs_modulus = 66e3
+poisson_ratio = 0.45
+density = 1080
+
+[[fixed]]
+box = { min = [-1e-9, -1, -1], max = [1e-9, 1, 1] }
+
+[loads]
+gravity = [0, 0, -9.81]
+
+[[cable]]
+start = [0, 0.01, 0.01]
+direction = [1, 0, 0]
+length = 0.4
+divisions = 10
+stiffness = 1e5
+
+[dynamics]
+dt = 0.02
+steps = 20
+mass_damping = 10.0
+stiffness_damping = 0.01
+save_every = 5
+initial = "static"
+actuation = [[[0.0, 1.0], [0.2, 0.9]]]
+"""
+
+
+@needs_dynamics
+def test_scene_dynamics_matches_the_api(tmp_path, beam):
+    path = tmp_path / "dynamic.toml"
+    path.write_text(DYNAMIC_SCENE, encoding="utf-8")
+    scene = sf.Scene.load(path)
+    assert scene.dynamics["dt"] == 0.02 and scene.dynamics["initial"] == "static"
+    assert scene.dynamics["actuation"][0](0.1) == pytest.approx(0.95)
+    from_scene = scene.simulate()
+    cable = sf.Cable.line((0, 0.01, 0.01), (1, 0, 0), 0.4, 10, stiffness=1e5)
+    beam.add_cable(cable)
+    start = sf.solve_static(beam, gravity=GRAVITY)
+    from_api = sf.simulate(beam, 0.02, 20, actuation=Keyframes([[0, 1], [0.2, 0.9]]), gravity=GRAVITY,
+                           damping=(10.0, 0.01), initial=start, save_every=5)
+    np.testing.assert_allclose(from_scene.positions, from_api.positions, atol=1e-12)
+    assert from_scene.cable_tensions(-1)[0].max() > 0
+    assert scene.to_dict()["dynamics"]["actuation"] == [[[0.0, 1.0], [0.2, 0.9]]]
+
+
+@needs_dynamics
+def test_run_dynamic_scene(tmp_path):
+    import json
+
+    from sorofem.cli import main
+
+    path = tmp_path / "dynamic.toml"
+    path.write_text(DYNAMIC_SCENE, encoding="utf-8")
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--out", str(out), "--quiet"]) == 0
+    for name in ("trajectory.pvd", "summary.json", "trajectory.png"):
+        assert (out / name).is_file(), name
+    assert len(list((out / "trajectory").glob("frame_*.vtu"))) == 5
+    summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
+    assert summary["steps"] == 20 and summary["frames"] == 5 and summary["cutbacks"] == 0
+    assert len(summary["cables"][0]["final_tensions"]) == 10
+    assert summary["dynamics"]["mass_damping"] == 10.0
+
+
+@pytest.mark.parametrize(
+    "old, new, key",
+    [
+        ("dt = 0.02", "dt = 0", "dynamics.dt"),
+        ("steps = 20", "", "dynamics.steps"),
+        ("save_every = 5", "save_every = 0", "dynamics.save_every"),
+        ("mass_damping = 10.0", "mass_damping = -1.0", "dynamics.mass_damping"),
+        ('initial = "static"', 'initial = "moving"', "dynamics.initial"),
+        ("actuation = [[[0.0, 1.0], [0.2, 0.9]]]", "actuation = [[[0.0, 1.0]], [[0.0, 1.0]]]", "dynamics.actuation"),
+        ("actuation = [[[0.0, 1.0], [0.2, 0.9]]]", "actuation = [[[0.2, 1.0], [0.0, 0.9]]]", "dynamics.actuation[0]"),
+        ("actuation = [[[0.0, 1.0], [0.2, 0.9]]]", "actuation = [[[0.0, 1.0], [0.2, 0.0]]]", "dynamics.actuation[0]"),
+        ("actuation = [[[0.0, 1.0], [0.2, 0.9]]]", "actuation = [[0.0, 1.0]]", "dynamics.actuation[0]"),
+        ("dt = 0.02", "dt = 0.02\ntime_step = 0.01", "dynamics.time_step"),
+    ],
+)
+def test_bad_dynamics_entries_name_the_key(tmp_path, old, new, key):
+    path = tmp_path / "bad.toml"
+    path.write_text(DYNAMIC_SCENE.replace(old, new, 1), encoding="utf-8")
+    with pytest.raises(sf.SceneError) as info:
+        sf.Scene.load(path)
+    assert info.value.key == key, str(info.value)
