@@ -207,19 +207,23 @@ impl Model {
         self.cables.cables.len()
     }
 
-    /// Sets cable `cable`'s actuation alpha (> 0; 1 = rest length, < 1 = pulled).
-    pub fn set_actuation(&mut self, cable: usize, actuation: f64) -> Result<()> {
-        let n_cables = self.n_cables();
-        let target = self
-            .cables
+    /// Cable `cable` for modification; the factorisation no longer holds the solution's Hessian.
+    fn cable_mut(&mut self, cable: usize) -> Result<&mut crate::energy::Cable> {
+        let len = self.n_cables();
+        self.factor_at_solution = false;
+        self.cables
             .cables
             .get_mut(cable)
             .ok_or_else(|| Error::IndexOutOfRange {
                 param: "cable".into(),
                 position: 0,
                 index: cable as i64,
-                len: n_cables,
-            })?;
+                len,
+            })
+    }
+
+    /// Sets cable `cable`'s actuation alpha (> 0; 1 = rest length, < 1 = pulled).
+    pub fn set_actuation(&mut self, cable: usize, actuation: f64) -> Result<()> {
         if !(actuation > 0.0 && actuation.is_finite()) {
             return Err(Error::invalid(
                 "actuation",
@@ -227,24 +231,12 @@ impl Model {
                 actuation,
             ));
         }
-        target.actuation = actuation;
-        self.factor_at_solution = false;
+        self.cable_mut(cable)?.actuation = actuation;
         Ok(())
     }
 
     /// Sets cable `cable`'s segment stiffness (N/m, > 0).
     pub fn set_cable_stiffness(&mut self, cable: usize, stiffness: f64) -> Result<()> {
-        let n_cables = self.n_cables();
-        let target = self
-            .cables
-            .cables
-            .get_mut(cable)
-            .ok_or_else(|| Error::IndexOutOfRange {
-                param: "cable".into(),
-                position: 0,
-                index: cable as i64,
-                len: n_cables,
-            })?;
         if !(stiffness > 0.0 && stiffness.is_finite()) {
             return Err(Error::invalid(
                 "stiffness",
@@ -252,8 +244,7 @@ impl Model {
                 stiffness,
             ));
         }
-        target.stiffness = stiffness;
-        self.factor_at_solution = false;
+        self.cable_mut(cable)?.stiffness = stiffness;
         Ok(())
     }
 

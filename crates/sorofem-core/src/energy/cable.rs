@@ -117,6 +117,29 @@ impl CableTerm {
     }
 }
 
+impl CableTerm {
+    /// Both endpoints' positions from segment `e`'s local DOFs (slot s holds `z[3 s..3 s + 3]`),
+    /// and the padded weights of [`CableTerm::endpoint_maps`].
+    fn endpoint_positions(&self, e: usize, z: &[f64]) -> ([Vector3<f64>; 2], [f64; 16]) {
+        let (c, k) = self.segments[e];
+        let cable = &self.cables[c];
+        let (_, weights) = self.endpoint_maps(e);
+        let mut y = [
+            Vector3::from(cable.points[k].offset),
+            Vector3::from(cable.points[k + 1].offset),
+        ];
+        for (end, y_end) in y.iter_mut().enumerate() {
+            for slot in 0..8 {
+                let w = weights[end * 8 + slot];
+                if w != 0.0 {
+                    *y_end += w * Vector3::new(z[3 * slot], z[3 * slot + 1], z[3 * slot + 2]);
+                }
+            }
+        }
+        (y, weights)
+    }
+}
+
 impl Term for CableTerm {
     fn stencil_size(&self) -> usize {
         3 * 2 * Cable::MAX_BLOCKS
@@ -148,20 +171,7 @@ impl Term for CableTerm {
     ) -> f64 {
         let (c, k) = self.segments[e];
         let cable = &self.cables[c];
-        let (_, weights) = self.endpoint_maps(e);
-        // Endpoint positions from the local DOFs: slot s (0..8) holds z[3 s..3 s + 3].
-        let mut y = [
-            Vector3::from(cable.points[k].offset),
-            Vector3::from(cable.points[k + 1].offset),
-        ];
-        for end in 0..2 {
-            for slot in 0..8 {
-                let w = weights[end * 8 + slot];
-                if w != 0.0 {
-                    y[end] += w * Vector3::new(z[3 * slot], z[3 * slot + 1], z[3 * slot + 2]);
-                }
-            }
-        }
+        let (y, weights) = self.endpoint_positions(e, z);
         let d = y[1] - y[0];
         let length = d.norm();
         let rest = cable.rest_lengths[k];
@@ -228,19 +238,7 @@ impl CableTerm {
         // The gradient is linear in k, so d(grad)/dk = grad / k.
         self.element(e, z, Some(d_stiffness), None, HessianMode::Exact);
         d_stiffness.iter_mut().for_each(|v| *v /= stiffness);
-        let (_, weights) = self.endpoint_maps(e);
-        let mut y = [
-            Vector3::from(cable.points[k].offset),
-            Vector3::from(cable.points[k + 1].offset),
-        ];
-        for end in 0..2 {
-            for slot in 0..8 {
-                let w = weights[end * 8 + slot];
-                if w != 0.0 {
-                    y[end] += w * Vector3::new(z[3 * slot], z[3 * slot + 1], z[3 * slot + 2]);
-                }
-            }
-        }
+        let (y, weights) = self.endpoint_positions(e, z);
         let d = y[1] - y[0];
         let length = d.norm();
         let rest = cable.rest_lengths[k];
