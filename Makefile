@@ -4,9 +4,10 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.deps-stamp
 BUILD_STAMP := $(VENV)/.build-stamp
+DOCS_STAMP := $(VENV)/.docs-stamp
 RUST_SOURCES := $(shell find crates -name '*.rs' -o -name Cargo.toml) Cargo.toml pyproject.toml
 
-.PHONY: demo test test-rust test-python test-all bench build fmt clean
+.PHONY: demo test test-rust test-python test-all bench build fmt clean docs test-viewer
 
 $(STAMP): pyproject.toml
 	@command -v $(PYTHON) >/dev/null || { echo "error: $(PYTHON) not found (set PYTHON=...)"; exit 1; }
@@ -40,6 +41,19 @@ bench: build
 	$(PY) -m pip install --quiet "scikit-fem>=10"
 	$(PY) benchmarks/run.py --write BENCHMARKS.md
 	$(PY) -m pytest -q -m bench
+
+# The documentation site (mkdocs.yml, docs/) into site/; warnings are errors. Not part of `test`.
+$(DOCS_STAMP): $(STAMP)
+	$(PY) -m pip install --quiet "mkdocs>=1.5" "mkdocstrings[python]>=0.24"
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)
+	$(VENV)/bin/mkdocs build --strict --quiet
+
+# The browser viewer (optional extra) and, when Debian's chromium is installed, a real-browser test.
+test-viewer: build
+	$(PY) -m pip install --quiet "viser>=1.0" "playwright>=1.40"
+	SOROFEM_BROWSER_TEST=1 $(PY) -m pytest -q tests/test_viewer.py -rs
 
 fmt:
 	cargo fmt --all

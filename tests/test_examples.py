@@ -4,6 +4,7 @@ through the command line."""
 from __future__ import annotations
 
 import importlib.util
+import inspect
 import json
 from pathlib import Path
 from types import ModuleType
@@ -46,7 +47,9 @@ def test_example_checks_pass(path, tmp_path):
     missing = [str(f) for f in getattr(module, "REQUIRED_FILES", ()) if not Path(f).is_file()]
     if missing:
         pytest.skip(f"{path.name} needs data that is not here: {', '.join(missing)}")
-    result = module.run(tmp_path)
+    # Heavy examples take ``quick`` (fewer cases, same checks); their full runs are benchmarks.
+    quick = "quick" in inspect.signature(module.run).parameters
+    result = module.run(tmp_path, quick=True) if quick else module.run(tmp_path)
     checks = result["checks"]
     assert checks, f"{path.name} checks nothing"
     failed = {name: check for name, check in checks.items() if not _passed(check)}

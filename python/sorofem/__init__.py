@@ -13,7 +13,7 @@ Examples
 
 from importlib.metadata import PackageNotFoundError, version as _version
 
-from . import cables, dynamics, errors, io, plot
+from . import cables, dynamics, errors, inverse, io, plot, targets
 from .cables import Cable, actuate
 from .dynamics import Trajectory, simulate
 from .errors import (
@@ -28,6 +28,8 @@ from .errors import (
 )
 from .model import Body, Mesh, NeoHookean, SolveReport, StaticResult, solve_static
 from .scene import Scene
+from .targets import Target
+from .inverse import control, estimate, gradient
 
 try:
     __version__ = _version("sorofem")
@@ -47,6 +49,10 @@ __all__ = [
     "actuate",
     "simulate",
     "Trajectory",
+    "Target",
+    "gradient",
+    "estimate",
+    "control",
     "SorofemError",
     "InputError",
     "ShapeError",
@@ -58,6 +64,8 @@ __all__ = [
     "cables",
     "dynamics",
     "errors",
+    "inverse",
     "io",
     "plot",
+    "targets",
 ]
