@@ -64,7 +64,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import ConvergenceError, InputError, ParameterError
+from .errors import InputError, ParameterError, SolverError
 from .targets import BoundTarget, Target
 
 __all__ = [
@@ -540,7 +540,7 @@ class _Problem:
                     g, self.body._forces.copy(), self.body._prescribed.copy(), init,
                     opts["tolerance"], opts["max_iterations"], steps,
                 )
-            except ConvergenceError:
+            except SolverError:  # no convergence, or a singular (unstable) Hessian
                 if k == len(attempts) - 1:
                     raise
                 continue
@@ -984,7 +984,7 @@ def _levenberg_marquardt(
         try:
             r_new, J_new = problem.evaluate(s_new, "jacobian")
             cost_new = 0.5 * r_new @ r_new
-        except ConvergenceError:
+        except SolverError:
             cost_new = math.inf
         evaluations += 1
         predicted = -(g @ step + 0.5 * step @ A @ step)
@@ -1026,7 +1026,7 @@ def _scipy_minimize(
     def fun(s: NDArray[np.float64]) -> Any:
         try:
             r, g = problem.evaluate(np.asarray(s, dtype=np.float64), "gradient" if gradient_based else "residual")
-        except ConvergenceError:
+        except SolverError:
             return (1e10, np.zeros_like(s)) if gradient_based else 1e10
         loss = 0.5 * r @ r
         last.update(s=np.array(s), loss=loss, rms=problem.rms(r))

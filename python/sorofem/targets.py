@@ -342,7 +342,7 @@ class Target:
     >>> import sorofem as sf
     >>> mesh = sf.Mesh.box(size=(0.4, 0.1, 0.1), cells=(8, 2, 2))
     >>> t = sf.Target.points([[0.4, 0.05, 0.05]], [[0.35, 0.05, -0.15]])
-    >>> t.bind(mesh).rms(mesh.points).round(4)
+    >>> round(t.bind(mesh).rms(mesh.points), 4)
     0.2062
     """
 

@@ -207,10 +207,9 @@ impl Model {
         self.cables.cables.len()
     }
 
-    /// Cable `cable` for modification; the factorisation no longer holds the solution's Hessian.
+    /// Cable `cable` for modification (callers invalidate the last solution when they change it).
     fn cable_mut(&mut self, cable: usize) -> Result<&mut crate::energy::Cable> {
         let len = self.n_cables();
-        self.factor_at_solution = false;
         self.cables
             .cables
             .get_mut(cable)
@@ -231,7 +230,11 @@ impl Model {
                 actuation,
             ));
         }
-        self.cable_mut(cable)?.actuation = actuation;
+        let target = self.cable_mut(cable)?;
+        if target.actuation != actuation {
+            target.actuation = actuation;
+            self.last_state = None;
+        }
         Ok(())
     }
 
@@ -244,7 +247,11 @@ impl Model {
                 stiffness,
             ));
         }
-        self.cable_mut(cable)?.stiffness = stiffness;
+        let target = self.cable_mut(cable)?;
+        if target.stiffness != stiffness {
+            target.stiffness = stiffness;
+            self.last_state = None;
+        }
         Ok(())
     }
 
@@ -304,6 +311,9 @@ impl Model {
                 format!("{} at tet {e}", material.density[e]),
             ));
         }
+        let changed = self.elastic.mu != material.mu
+            || self.elastic.lambda != material.lambda
+            || self.density != material.density;
         self.elastic.mu.clone_from(&material.mu);
         self.elastic.lambda.clone_from(&material.lambda);
         self.density.clone_from(&material.density);
@@ -314,8 +324,13 @@ impl Model {
                 (self.mesh.volumes().iter().sum::<f64>() / m * 6.0 * 2f64.sqrt()).cbrt();
             self.pressure_weight = mean_mu / mean_edge;
         }
+        // New parameters make the last solution (and any factorisation at it) stale: sensitivities
+        // then need a new solve rather than silently mixing old positions with new parameters.
         self.material_set = true;
-        self.factor_at_solution = false;
+        if changed {
+            self.factor_at_solution = false;
+            self.last_state = None;
+        }
         Ok(())
     }
 
