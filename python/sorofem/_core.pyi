@@ -118,6 +118,14 @@ class Model:
         """Cable `cable`'s alpha (> 0; 1 = rest, < 1 = pulled)."""
     def set_cable_stiffness(self, cable: int, stiffness: float) -> None:
         """Cable `cable`'s segment stiffness, N/m (> 0)."""
+    def adjoint(self, d_objective_d_positions: _F) -> dict[str, Any]:
+        """Adjoint gradient of a scalar objective of the last equilibrium's positions:
+        dO/dx (n, 3) -> dO/dtheta as {"mu", "lam", "rho": (m,), "gravity": (3,),
+        "cable_actuation", "cable_stiffness": (n_cables,)}. Needs a static solve with the
+        current parameters (raises ParameterError otherwise)."""
+    def forward(self, direction: dict[str, Any]) -> dict[str, Any]:
+        """Forward sensitivity along a parameter direction (any of the adjoint's keys):
+        {"dx": (n, 3) m per unit, "dp": (n,) Pa per unit or None}."""
     def cable_placements(self) -> list[list[tuple[str, int, float]]]:
         """Per cable and point: ("embedded", tet, distance m) | ("free", index, 0.0) | ("anchor", -1, 0.0)."""
     def simulate(
