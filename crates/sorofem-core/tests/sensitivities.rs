@@ -195,15 +195,24 @@ fn sensitivities_refuse_a_solution_older_than_the_parameters() {
     let c = vec![1.0; 3 * n];
     let loads = setup.loads.clone();
     setup.model.set_material(&setup.material).unwrap();
-    setup.model.solve(&loads, None, &SolveOptions::default()).unwrap();
+    setup
+        .model
+        .solve(&loads, None, &SolveOptions::default())
+        .unwrap();
     // Re-setting the same material keeps the solution; changing it or a cable makes it stale.
     setup.model.set_material(&setup.material).unwrap();
     assert!(setup.model.adjoint(&c).is_ok());
-    let stiffer = Material { mu: setup.material.mu.iter().map(|v| 1.1 * v).collect(), ..setup.material.clone() };
+    let stiffer = Material {
+        mu: setup.material.mu.iter().map(|v| 1.1 * v).collect(),
+        ..setup.material.clone()
+    };
     setup.model.set_material(&stiffer).unwrap();
     let err = setup.model.adjoint(&c).unwrap_err().to_string();
     assert!(err.contains("static solve"), "{err}");
-    setup.model.solve(&loads, None, &SolveOptions::default()).unwrap();
+    setup
+        .model
+        .solve(&loads, None, &SolveOptions::default())
+        .unwrap();
     setup.model.set_actuation(0, 0.8).unwrap();
     assert!(setup.model.forward(&ParamVector::zeros(m, 1)).is_err());
 }
