@@ -3,6 +3,8 @@
 Usage::
 
     sorofem run SCENE.toml --out DIR [--quiet] [--json]
+    sorofem estimate SCENE.toml --out DIR [--quiet] [--json]
+    sorofem control SCENE.toml --out DIR [--quiet] [--json]
     sorofem info MESH [--scale S] [--json]
     sorofem convert IN OUT [--scale S] [--quiet]
     sorofem view SCENE.toml [--port P] [--host H]
@@ -20,6 +22,15 @@ was placed. A scene with ``[dynamics]`` is integrated in time instead: ``run`` w
 ``DIR/trajectory.pvd`` with the frames in ``DIR/trajectory/``, ``DIR/trajectory.png`` (displacement
 and kinetic energy against time) and ``DIR/summary.json`` (steps, Newton iterations, cutbacks,
 energies, final cable tensions).
+
+``estimate`` fits the scene's ``[estimate]`` parameters so that its equilibrium meets
+``[target]`` (:func:`sorofem.estimate`); ``control`` finds the actuations of the ``[control]``
+cables that bring ``[target]`` closest (:func:`sorofem.control`). Both use the scene's gravity
+and ``[solver]`` options (the Newton tolerance no looser than 1e-10) and write ``DIR/summary.json`` (estimate: the parameters, the material
+as (mu, lambda) and (E, nu), the residual, forward solves and history; control: actuation,
+distance, reachable, forward solves, history) and ``DIR/result.vtu`` (the final equilibrium).
+An estimate that does not converge, or a control target that is not reachable, exits 3
+(the outputs are still written).
 
 Exit codes: 0 success; 2 bad input (scene, mesh or arguments: one ``error: ...`` line on
 stderr); 3 the solver failed (``summary.json`` is still written, with
@@ -88,6 +99,14 @@ def _build_parser() -> argparse.ArgumentParser:
     run.add_argument("--quiet", action="store_true", help="print nothing on success")
     run.add_argument("--json", action="store_true", help="print summary.json to stdout instead of text")
 
+    for name, text in (("estimate", "fit the scene's [estimate] parameters to its [target]"),
+                       ("control", "find the [control] cable actuations that reach the scene's [target]")):
+        inv = sub.add_parser(name, help=text)
+        inv.add_argument("scene", type=Path, help="TOML scene file with [target] and [" + name + "]")
+        inv.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder (created)")
+        inv.add_argument("--quiet", action="store_true", help="print nothing on success")
+        inv.add_argument("--json", action="store_true", help="print summary.json to stdout instead of text")
+
     info = sub.add_parser("info", help="print statistics of a mesh file")
     info.add_argument("mesh", type=Path, help="mesh file (.tet or any format meshio reads)")
     info.add_argument("--scale", type=float, default=1.0, help="coordinate scale factor (default 1)")
@@ -112,6 +131,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = _build_parser().parse_args(argv)
         if args.command == "run":
             return _run(args)
+        if args.command in ("estimate", "control"):
+            return _inverse(args)
         if args.command == "convert":
             from .convert import _cli as _convert
 
@@ -300,6 +321,103 @@ def _run_dynamics(args: argparse.Namespace, scene: Any, outputs: dict[str, Path]
               f"max displacement {summary['max_displacement']:.6g} m")
         print(f"wrote {', '.join(outputs)} ({trajectory.n_frames} frames) to {outputs['summary.json'].parent}")
     return EXIT_OK
+
+
+# ---------------------------------------------------------------------------
+# estimate, control
+
+
+def _inverse(args: argparse.Namespace) -> int:
+    """``estimate`` / ``control``: summary.json and result.vtu in ``--out``."""
+    import sorofem as sf
+
+    from .inverse import DEFAULT_TOLERANCE
+    from .io import write_result
+    from .scene import Scene
+
+    command = args.command
+    scene = Scene.load(args.scene)
+    section = getattr(scene, command)
+    if scene.target is None:
+        raise InputError(f"{scene.path}: '{command}' needs a [target] table")
+    if section is None:
+        raise InputError(f"{scene.path}: '{command}' needs an [{command}] table")
+    out: Path = args.out
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out: {out} exists and is not a folder")
+    outputs = {name: out / name for name in ("summary.json", "result.vtu")}
+    for target in outputs.values():
+        for source in (p for p in (scene.path, scene.mesh.source) if p is not None):
+            if target.resolve() == Path(source).resolve():
+                raise InputError(f"--out: writing {target.name} would overwrite the input file {source}")
+    solve = scene.solver
+    # Sensitivities are only as accurate as the equilibria: never looser than the inverse default.
+    tolerance = min(solve["tolerance"], DEFAULT_TOLERANCE)
+    base = {
+        "scene": str(scene.path),
+        "command": command,
+        "n_nodes": scene.mesh.n_nodes,
+        "n_tets": scene.mesh.n_tets,
+        "formulation": scene.formulation,
+        "gravity": scene.gravity.tolist(),
+        "solver_options": dict(solve),
+        "options": dict(section),
+    }
+    if command == "estimate":
+        fit = sf.estimate(
+            scene.body, scene.target, section["params"], section["x0"], bounds=section["bounds"],
+            method=section["method"], starts=section["starts"], gravity=scene.gravity, tolerance=tolerance,
+            max_iterations=solve["max_iterations"], load_steps=solve["load_steps"],
+        )
+        m = fit.material
+        summary = {
+            **base,
+            **fit.to_dict(),
+            "converged": fit.converged,
+            "shear_modulus": m.shear_modulus, "lame_lambda": m.lame_lambda,
+            "youngs_modulus": m.youngs_modulus, "poisson_ratio": m.poisson_ratio,
+            "residual": fit.residual,
+            "history": fit.history,
+        }
+        ok, result = fit.converged, fit.result
+        lines = [
+            f"{scene.path.name}: fitted {', '.join(section['params'])} ({section['method']})",
+            f"mu {_fmt(m.shear_modulus)} Pa, lambda {_fmt(m.lame_lambda)} Pa; "
+            f"E {_fmt(m.youngs_modulus)} Pa, nu {_fmt(m.poisson_ratio)}",
+            f"residual {fit.residual:.3e} m (rms), {fit.forward_solves} forward solves, {fit.message}",
+        ]
+        failure = f"the fit did not converge: {fit.message}"
+    else:
+        ctl = sf.control(
+            scene.body, scene.target, cables=section["cables"], bounds=section["bounds"], method=section["method"],
+            gravity=scene.gravity, solve_tolerance=tolerance, max_iterations=solve["max_iterations"], load_steps=solve["load_steps"],
+        )
+        summary = {**base, **ctl.to_dict(), "history": ctl.history, "converged": ctl.reachable}
+        ok, result = ctl.reachable, ctl.result
+        lines = [
+            f"{scene.path.name}: actuation {', '.join(f'{a:.6g}' for a in ctl.actuation)} "
+            f"of cable(s) {section['cables']} ({section['method']})",
+            f"distance {ctl.distance:.3e} m (rms), max {ctl.max_distance:.3e} m, "
+            f"{'reachable' if ctl.reachable else 'NOT reachable'}, {ctl.forward_solves} forward solves",
+        ]
+        failure = f"target not reachable: {ctl.message}"
+    out.mkdir(parents=True, exist_ok=True)
+    if result is not None:
+        write_result(outputs["result.vtu"], result)
+    text = _write_json(outputs["summary.json"], summary)
+    if args.json:
+        sys.stdout.write(text)
+    elif not args.quiet:
+        print("\n".join(lines))
+        print(f"wrote {', '.join(outputs)} to {out}")
+    if not ok:
+        print(f"error: {_one_line(Exception(failure))} (report in {outputs['summary.json']})", file=sys.stderr)
+        return EXIT_SOLVER
+    return EXIT_OK
+
+
+def _fmt(value: Any) -> str:
+    return f"{value:.6g}" if np.ndim(value) == 0 else f"{np.min(value):.6g}..{np.max(value):.6g}"
 
 
 # ---------------------------------------------------------------------------

@@ -57,6 +57,26 @@ Schema
     actuation = [[[0.0, 1.0], [0.5, 0.8]]]   # per cable: [time, alpha] keyframes, linear, held
                                # outside; default: every cable keeps its `actuation`
 
+    [target]                   # optional (for `sorofem estimate` / `sorofem control`): exactly one of
+    nodes = [17, 18, 19]       # ... mesh node indices, with their goal `positions` (m) ...
+    positions = [[0.1, 0, -0.01], [0.1, 0.02, -0.01], [0.1, 0.02, 0.01]]
+    # points = [[0.1, 0.01, 0.01]]   # ... or marker points at rest (m) + `positions` ...
+    # surface = "goal.obj"     # ... or a goal surface, relative to the scene file, with
+    # scale = 1.0              #     optional coordinate scale and the body's own
+    # rest = "rest.obj"        #     rest surface (default: the mesh's boundary)
+
+    [estimate]                 # optional: `sorofem estimate` fits these to [target]
+    params = ["shear_modulus", "lame_lambda"]   # names of sorofem.inverse.PARAMETERS
+    x0 = [20e3, 0.2e6]         # initial values, one per name
+    bounds = [[1e3, 1e6], [1e3, 1e8]]           # optional, one [lo, hi] per name
+    method = "least-squares"   # optional: "least-squares", "l-bfgs-b" or "nelder-mead"
+    starts = 0                 # optional: number of extra random starts
+
+    [control]                  # optional: `sorofem control` finds cable actuations for [target]
+    cables = [0]               # indices of [[cable]] entries (default: all)
+    bounds = [[0.3, 1.0]]      # optional, one alpha range per cable
+    method = "l-bfgs-b"        # optional: or "nelder-mead"
+
 Validation is strict: an unknown key, a wrong type, a missing mesh file, a ``[[fixed]]``
 entry selecting no node or an out-of-range value raises :class:`~sorofem.SceneError`
 with the file, the dotted key (e.g. ``fixed[0].box.min``) and, when it can be found, the
@@ -85,6 +105,7 @@ from .cables import OUTSIDE_MODES, Cable
 from .dynamics import Keyframes, Trajectory, simulate
 from .errors import InputError, ParameterError, SceneError
 from .io import read_mesh
+from .targets import Target
 from .model import (
     FORMULATIONS,
     PRESSURE_MASSES,
@@ -98,7 +119,12 @@ from .model import (
 
 __all__ = ["Scene"]
 
-_TOP_KEYS = ("mesh", "material", "formulation", "fixed", "loads", "solver", "cable", "dynamics")
+_TOP_KEYS = (
+    "mesh", "material", "formulation", "fixed", "loads", "solver", "cable", "dynamics", "target", "estimate",
+    "control",
+)
+_ESTIMATE_METHODS = ("least-squares", "l-bfgs-b", "nelder-mead")
+_CONTROL_METHODS = ("l-bfgs-b", "nelder-mead")
 _CABLE_KEYS = (
     "points", "start", "direction", "length", "divisions", "stiffness", "actuation", "transition",
     "anchor_first", "snap_tolerance", "outside", "free_node_mass",
@@ -271,6 +297,12 @@ class Scene:
     #: ``[dynamics]`` with defaults filled in (``actuation``: a list of
     #: :class:`sorofem.dynamics.Keyframes` per cable, or None), or None for a static scene.
     dynamics: dict[str, Any] | None = None
+    #: ``[target]`` as a :class:`sorofem.Target`, or None.
+    target: Target | None = None
+    #: ``[estimate]``: ``params``, ``x0``, ``bounds``, ``method``, ``starts`` (None when absent), or None.
+    estimate: dict[str, Any] | None = None
+    #: ``[control]``: ``cables`` (indices), ``bounds``, ``method``, or None.
+    control: dict[str, Any] | None = None
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> "Scene":
@@ -322,6 +354,9 @@ class Scene:
         solver = _build_solver(check, data.get("solver", {}))
         cables = _apply_cables(check, data.get("cable", []), body)
         dynamics = _build_dynamics(check, data["dynamics"], body) if "dynamics" in data else None
+        target = _build_target(check, data["target"], body, path.parent) if "target" in data else None
+        estimate = _build_estimate(check, data["estimate"]) if "estimate" in data else None
+        control = _build_control(check, data["control"], body) if "control" in data else None
         return cls(
             path=path,
             mesh=mesh,
@@ -333,6 +368,9 @@ class Scene:
             formulation_options=options,
             cables=cables,
             dynamics=dynamics,
+            target=target,
+            estimate=estimate,
+            control=control,
         )
 
     def solve(self) -> StaticResult:
@@ -628,3 +666,148 @@ def _build_dynamics(check: _Checker, raw: Any, body: Body) -> dict[str, Any]:
                 raise check.error(key, str(exc)) from None
         options["actuation"] = schedule
     return options
+
+
+def _points(check: _Checker, value: Any, key: str) -> np.ndarray:
+    if not isinstance(value, list) or not value:
+        raise check.error(key, f"expected a non-empty array of [x, y, z] points, got {_type_name(value)}")
+    return np.array([check.vec3(p, key) for p in value])
+
+
+def _build_target(check: _Checker, raw: Any, body: Body, base: Path) -> Target:
+    table = check.table(raw, "target")
+    check.keys(table, ("nodes", "points", "positions", "surface", "scale", "rest"), "target")
+    given = [k for k in ("nodes", "points", "surface") if k in table]
+    if len(given) != 1:
+        raise check.error("target", "expected exactly one of 'nodes', 'points' or 'surface'")
+    kind = given[0]
+    if kind == "surface":
+        for name in ("positions",):
+            if name in table:
+                raise check.error(f"target.{name}", "not allowed with 'surface' (the goal is the surface)")
+        files = {}
+        for name in ("surface", "rest"):
+            if name in table:
+                file = Path(check.string(table[name], f"target.{name}"))
+                file = file if file.is_absolute() else base / file
+                if not file.is_file():
+                    raise check.error(f"target.{name}", f"surface file not found: {file}")
+                files[name] = file
+        scale = check.number(table["scale"], "target.scale", minimum=0.0) if "scale" in table else 1.0
+        key = "target.surface"
+        try:
+            target = Target.surface(files["surface"], scale, rest=files.get("rest"))
+        except InputError as exc:
+            raise check.error(key, str(exc)) from None
+    else:
+        for name in ("scale", "rest"):
+            if name in table:
+                raise check.error(f"target.{name}", "only allowed with 'surface'")
+        if "positions" not in table:
+            raise check.error("target.positions", f"missing: the goal position of each of the target's {kind}")
+        positions = _points(check, table["positions"], "target.positions")
+        if kind == "nodes":
+            raw_nodes = table["nodes"]
+            if not isinstance(raw_nodes, list) or not raw_nodes:
+                raise check.error("target.nodes", f"expected a non-empty array of node indices, got {_type_name(raw_nodes)}")
+            nodes = np.array([check.integer(n, "target.nodes", 0) for n in raw_nodes], dtype=np.int64)
+            if nodes.max() >= body.mesh.n_nodes:
+                raise check.error(
+                    "target.nodes",
+                    f"node index {int(nodes.max())} out of range: the mesh has {body.mesh.n_nodes} nodes",
+                )
+            rest = nodes
+        else:
+            rest = _points(check, table["points"], "target.points")
+        if len(positions) != len(rest):
+            raise check.error("target.positions", f"expected {len(rest)} positions, one per entry of '{kind}', got {len(positions)}")
+        key = f"target.{kind}"
+        try:
+            target = Target.nodes(rest, positions) if kind == "nodes" else Target.points(rest, positions)
+        except InputError as exc:
+            raise check.error(key, str(exc)) from None
+    try:
+        target.bind(body.mesh)
+    except InputError as exc:
+        raise check.error(key, str(exc)) from None
+    return target
+
+
+def _number_list(check: _Checker, value: Any, key: str) -> list[Any]:
+    """An array of numbers (or of arrays of numbers, for field / cable parameters)."""
+    if not isinstance(value, list) or not value:
+        raise check.error(key, f"expected a non-empty array, got {_type_name(value)}")
+    return [
+        [check.number(x, key) for x in v] if isinstance(v, list) else check.number(v, key) for v in value
+    ]
+
+
+def _bounds(check: _Checker, value: Any, key: str, count: int, what: str) -> list[tuple[float, float]]:
+    if not isinstance(value, list) or len(value) != count:
+        shown = f"{len(value)} entries" if isinstance(value, list) else _type_name(value)
+        raise check.error(key, f"expected one [lo, hi] per {what} ({count}), got {shown}")
+    out = []
+    for pair in value:
+        if not isinstance(pair, list) or len(pair) != 2:
+            raise check.error(key, f"expected [lo, hi] pairs, got {pair!r}")
+        lo, hi = check.number(pair[0], key), check.number(pair[1], key)
+        if lo >= hi:
+            raise check.error(key, f"expected lo < hi, got [{lo:g}, {hi:g}]")
+        out.append((lo, hi))
+    return out
+
+
+def _method(check: _Checker, table: dict[str, Any], key: str, allowed: tuple[str, ...]) -> str:
+    method = check.string(table.get("method", allowed[0]), key)
+    if method not in allowed:
+        raise check.error(key, f"expected one of {', '.join(repr(m) for m in allowed)}, got {method!r}")
+    return method
+
+
+def _build_estimate(check: _Checker, raw: Any) -> dict[str, Any]:
+    from .inverse import PARAMETERS
+
+    table = check.table(raw, "estimate")
+    check.keys(table, ("params", "x0", "bounds", "method", "starts"), "estimate")
+    for required in ("params", "x0"):
+        if required not in table:
+            raise check.error(f"estimate.{required}", "missing")
+    names = table["params"]
+    if not isinstance(names, list) or not names:
+        raise check.error("estimate.params", f"expected a non-empty array of parameter names, got {_type_name(names)}")
+    names = [check.string(n, "estimate.params") for n in names]
+    for n in names:
+        if n.partition(":")[0] not in PARAMETERS or ":" in n:
+            raise check.error("estimate.params", f"unknown parameter {n!r} (expected one of {', '.join(PARAMETERS)})")
+    x0 = _number_list(check, table["x0"], "estimate.x0")
+    if len(x0) != len(names):
+        raise check.error("estimate.x0", f"expected {len(names)} value(s), one per parameter, got {len(x0)}")
+    bounds = _bounds(check, table["bounds"], "estimate.bounds", len(names), "parameter") if "bounds" in table else None
+    starts = check.integer(table["starts"], "estimate.starts", 0) if "starts" in table else None
+    return {
+        "params": names, "x0": x0, "bounds": bounds,
+        "method": _method(check, table, "estimate.method", _ESTIMATE_METHODS), "starts": starts or None,
+    }
+
+
+def _build_control(check: _Checker, raw: Any, body: Body) -> dict[str, Any]:
+    table = check.table(raw, "control")
+    check.keys(table, ("cables", "bounds", "method"), "control")
+    n = len(body.cables)
+    if n == 0:
+        raise check.error("control", "needs at least one [[cable]] entry")
+    if "cables" in table:
+        raw_cables = table["cables"]
+        if not isinstance(raw_cables, list) or not raw_cables:
+            raise check.error("control.cables", f"expected a non-empty array of cable indices, got {_type_name(raw_cables)}")
+        cables = [check.integer(c, "control.cables", 0) for c in raw_cables]
+        if max(cables) >= n:
+            raise check.error("control.cables", f"cable index {max(cables)} out of range: the scene has {n} cable(s)")
+        if len(set(cables)) != len(cables):
+            raise check.error("control.cables", "a cable is listed twice")
+    else:
+        cables = list(range(n))
+    bounds = _bounds(check, table["bounds"], "control.bounds", len(cables), "cable") if "bounds" in table else None
+    if bounds is not None and any(lo <= 0 for lo, _ in bounds):
+        raise check.error("control.bounds", "expected actuation bounds > 0")
+    return {"cables": cables, "bounds": bounds, "method": _method(check, table, "control.method", _CONTROL_METHODS)}

@@ -1,0 +1,140 @@
+"""`sorofem estimate` and `sorofem control`: [target], [estimate] and [control] scenes."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import sorofem as sf
+from sorofem.cli import main
+
+BASE = """\
+[mesh]
+box = { size = [0.1, 0.02, 0.02], cells = [4, 1, 1] }
+
+[material]
+youngs_modulus = 66e3
+poisson_ratio = 0.45
+density = 1080
+
+[[fixed]]
+box = { min = [-1e-9, -1, -1], max = [1e-9, 1, 1] }
+
+[loads]
+gravity = [0, 0, -9.81]
+"""
+
+CABLE = """
+[[cable]]
+start = [0.0, 0.01, 0.018]
+direction = [1, 0, 0]
+length = 0.1
+divisions = 4
+stiffness = 1e4
+"""
+
+
+def _free_end(text: str, tmp_path, alpha: float | None = None):
+    """Free-end node indices and their equilibrium positions (cable 0 at ``alpha`` if given)."""
+    scene = sf.Scene.from_toml(text, tmp_path / "goal.toml")
+    if alpha is not None:
+        scene.body.set_actuation(0, alpha)
+    result = sf.solve_static(scene.body, scene.gravity, tolerance=1e-12)
+    nodes = np.flatnonzero(np.isclose(scene.mesh.points[:, 0], 0.1))
+    return nodes, result.positions[nodes]
+
+
+def _target(nodes, positions) -> str:
+    return f"\n[target]\nnodes = {nodes.tolist()}\npositions = {positions.tolist()}\n"
+
+
+def test_estimate_recovers_mu_lambda(tmp_path, capsys):
+    nodes, goal = _free_end(BASE, tmp_path)
+    scene = tmp_path / "fit.toml"
+    scene.write_text(
+        BASE + _target(nodes, goal)
+        + '\n[estimate]\nparams = ["shear_modulus", "lame_lambda"]\nx0 = [15e3, 0.15e6]\n'
+    )
+    out = tmp_path / "out"
+    assert main(["estimate", str(scene), "--out", str(out)]) == 0
+    assert "mu" in capsys.readouterr().out
+    summary = json.loads((out / "summary.json").read_text())
+    truth = sf.NeoHookean(youngs_modulus=66e3, poisson_ratio=0.45)
+    assert summary["shear_modulus"] == pytest.approx(truth.shear_modulus, rel=1e-4)
+    assert summary["lame_lambda"] == pytest.approx(truth.lame_lambda, rel=1e-4)
+    assert summary["youngs_modulus"] == pytest.approx(66e3, rel=1e-4)
+    assert summary["poisson_ratio"] == pytest.approx(0.45, rel=1e-4)
+    for key in ("residual", "forward_solves", "history"):
+        assert key in summary
+    assert (out / "result.vtu").is_file()
+
+
+def test_control_recovers_alpha(tmp_path, capsys):
+    text = BASE + CABLE
+    nodes, goal = _free_end(text, tmp_path, alpha=0.9)
+    scene = tmp_path / "ctl.toml"
+    scene.write_text(text + _target(nodes, goal) + "\n[control]\ncables = [0]\nbounds = [[0.5, 1.0]]\n")
+    out = tmp_path / "out"
+    assert main(["control", str(scene), "--out", str(out), "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert printed["actuation"][0] == pytest.approx(0.9, abs=1e-4)
+    assert printed["reachable"] is True
+    for key in ("distance", "forward_solves", "history"):
+        assert key in printed
+    assert (out / "result.vtu").is_file() and (out / "summary.json").is_file()
+
+
+BAD_TARGETS = [
+    ("[target]\nnodes = [19]\n", "target.positions"),
+    ("[target]\nnodes = [999]\npositions = [[0, 0, 0]]\n", "target.nodes"),
+    ("[target]\nnodes = [1, 2]\npositions = [[0, 0, 0]]\n", "target.positions"),
+    ("[target]\nnodes = [1]\npoints = [[0, 0, 0]]\npositions = [[0, 0, 0]]\n", "target"),
+    ("[target]\nnodes = [1]\npositions = [[0, 0, 0]]\ncolour = 1\n", "target.colour"),
+    ("[target]\nnodes = [1]\npositions = [[0, 0]]\n", "target.positions"),
+    ("[target]\nnodes = [\"a\"]\npositions = [[0, 0, 0]]\n", "target.nodes"),
+    ("[target]\npoints = [[5, 5, 5]]\npositions = [[0, 0, 0]]\n", "target.points"),
+    ('[target]\nsurface = "missing.obj"\n', "target.surface"),
+    ('[target]\nsurface = 3\n', "target.surface"),
+    ("[target]\nnodes = [1]\npositions = [[0, 0, 0]]\nscale = 2\n", "target.scale"),
+]
+
+
+@pytest.mark.parametrize("section, key", BAD_TARGETS)
+@pytest.mark.parametrize("command", ["estimate", "control"])
+def test_bad_target_exits_2(tmp_path, capsys, section, key, command):
+    scene = tmp_path / "bad.toml"
+    tail = '[estimate]\nparams = ["shear_modulus"]\nx0 = [20e3]\n' if command == "estimate" else "[control]\n"
+    scene.write_text(BASE + CABLE + "\n" + section + "\n" + tail)
+    assert main([command, str(scene), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and key in lines[0], err
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(
+    "section, key",
+    [
+        ('[estimate]\nparams = ["shear_modulus"]\n', "estimate.x0"),
+        ('[estimate]\nparams = ["bogus"]\nx0 = [1]\n', "estimate.params"),
+        ('[estimate]\nparams = ["shear_modulus"]\nx0 = [1]\nmethod = "magic"\n', "estimate.method"),
+        ('[estimate]\nparams = ["shear_modulus"]\nx0 = [1]\nbounds = [1, 2]\n', "estimate.bounds"),
+        ('[estimate]\nparams = ["shear_modulus"]\nx0 = [1]\nstarts = "x"\n', "estimate.starts"),
+        ('[control]\ncables = [3]\n', "control.cables"),
+        ('[control]\nbounds = [[0.5]]\n', "control.bounds"),
+        ('[control]\nspeed = 1\n', "control.speed"),
+    ],
+)
+def test_bad_estimate_control_sections(tmp_path, section, key):
+    with pytest.raises(sf.SceneError) as info:
+        sf.Scene.from_toml(BASE + CABLE + "\n" + section, tmp_path / "s.toml")
+    assert key in str(info.value)
+
+
+def test_missing_sections_exit_2(tmp_path, capsys):
+    scene = tmp_path / "s.toml"
+    scene.write_text(BASE)
+    assert main(["estimate", str(scene), "--out", str(tmp_path / "o")]) == 2
+    assert "[target]" in capsys.readouterr().err
