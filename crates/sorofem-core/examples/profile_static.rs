@@ -41,7 +41,16 @@ fn main() {
         .map(|&i| i as i64)
         .collect();
     let m = mesh.n_tets();
-    let (mu, lambda) = lame_from_young(100e3, if mixed { 0.4999 } else { 0.4 });
+    // Hammerbot defaults; PROFILE_E / PROFILE_NU / PROFILE_RHO / PROFILE_GRAVITY_AXIS override.
+    let env = |name: &str, default: f64| {
+        std::env::var(name).map_or(default, |v| v.parse::<f64>().expect(name))
+    };
+    let (mu, lambda) = lame_from_young(
+        env("PROFILE_E", 100e3),
+        env("PROFILE_NU", if mixed { 0.4999 } else { 0.4 }),
+    );
+    let mut gravity = [0.0; 3];
+    gravity[env("PROFILE_GRAVITY_AXIS", 1.0) as usize] = -env("PROFILE_G", 9.8);
     let formulation = if mixed {
         Formulation::Mixed {
             mass: sorofem_core::PressureMass::Consistent,
@@ -63,7 +72,7 @@ fn main() {
         .set_material(&Material {
             mu: vec![mu; m],
             lambda: vec![lambda; m],
-            density: vec![1070.0; m],
+            density: vec![env("PROFILE_RHO", 1070.0); m],
         })
         .unwrap();
     for _ in 0..3 {
@@ -71,7 +80,7 @@ fn main() {
         let s = model
             .solve(
                 &Loads {
-                    gravity: [0.0, -9.8, 0.0],
+                    gravity,
                     ..Default::default()
                 },
                 None,
@@ -83,6 +92,13 @@ fn main() {
             "solve {:.4} s, {} iterations; assembly {:.4} factorization {:.4} solve {:.4} line search {:.4}",
             t.elapsed().as_secs_f64(), r.iterations, r.timings.assembly, r.timings.factorization, r.timings.solve, r.timings.line_search
         );
+        if std::env::var_os("SOROFEM_HISTORY").is_some() {
+            println!("  projected steps {}", r.projected_steps);
+            for (k, res) in r.residual_history.iter().enumerate() {
+                let step = r.step_lengths.get(k).copied().unwrap_or(f64::NAN);
+                println!("  {k:3} residual {res:.3e} step {step:.4}");
+            }
+        }
     }
     // Isolated kernels.
     let n = mesh.n_nodes();

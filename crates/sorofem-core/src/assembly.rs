@@ -1,6 +1,8 @@
 //! The one global loop over elements. Element kernels run in parallel (rayon) into a per-element
-//! buffer; a serial pass adds them into the reduced gradient and the lower triangle of the sparse
-//! Hessian through scatter positions computed once, when the assembler is built.
+//! buffer; the lower triangle of the sparse Hessian is then gathered from it in parallel, each
+//! stored entry summing its element contributions in element order through lists computed once,
+//! when the assembler is built (deterministic, no atomics). The gradient and energy sums are
+//! serial (12 values per element, cheap).
 //!
 //! DOFs are "full" (all `3 n` displacements plus any extra unknowns such as pressures) or "free"
 //! (the full DOFs minus the fixed ones, in increasing order); the Newton unknowns are the free ones.
@@ -19,9 +21,16 @@ pub struct Assembler {
     pattern: LowerPattern,
     /// Per term: free index of each local DOF (`n_el * s`, FIXED when eliminated).
     local_free: Vec<Vec<u32>>,
-    /// Per term: position in the Hessian values of each local pair (`n_el * s * s`, FIXED when the
-    /// pair is eliminated or lies in the upper triangle).
-    scatter: Vec<Vec<u32>>,
+    /// Per term: for each stored Hessian entry `p`, the local Hessian entries that add into it,
+    /// `gather_index[gather_ptr[p]..gather_ptr[p + 1]]`, each `e * s * s + a * s + b`, in
+    /// increasing element order.
+    gather: Vec<Gather>,
+}
+
+/// Compressed lists of element-Hessian entries per stored Hessian entry.
+struct Gather {
+    ptr: Vec<u32>,
+    index: Vec<u32>,
 }
 
 /// Energy (J), reduced gradient (free DOFs) and optionally the Hessian's lower-triangle values.
@@ -95,30 +104,58 @@ impl Assembler {
             row_idx,
         };
 
-        let scatter = terms
+        let gather = terms
             .iter()
             .zip(&local_free)
             .map(|(term, free)| {
                 if term.is_linear() {
-                    return Vec::new();
+                    return Gather {
+                        ptr: vec![0; pattern.nnz() + 1],
+                        index: Vec::new(),
+                    };
                 }
                 let s = term.stencil_size();
-                let mut out = vec![FIXED; free.len() * s];
-                out.par_chunks_mut(s * s).zip(free.par_chunks(s)).for_each(
-                    |(positions, element)| {
-                        for (a, &r) in element.iter().enumerate() {
-                            for (b, &c) in element.iter().enumerate() {
-                                if r != FIXED && c != FIXED && r >= c {
-                                    positions[a * s + b] = pattern
-                                        .position(r as usize, c as usize)
-                                        .expect("pair in pattern")
-                                        as u32;
-                                }
+                // Counting sort of (position, local entry) pairs by position keeps each list in
+                // element order.
+                let positions: Vec<u32> = free
+                    .par_chunks(s)
+                    .flat_map_iter(|element| {
+                        let pattern = &pattern;
+                        (0..s * s).map(move |ab| {
+                            let (r, c) = (element[ab / s], element[ab % s]);
+                            if r != FIXED && c != FIXED && r >= c {
+                                pattern
+                                    .position(r as usize, c as usize)
+                                    .expect("pair in pattern")
+                                    as u32
+                            } else {
+                                FIXED
                             }
-                        }
-                    },
+                        })
+                    })
+                    .collect();
+                assert!(
+                    positions.len() < FIXED as usize,
+                    "element Hessian entries exceed u32 indexing"
                 );
-                out
+                let mut ptr = vec![0u32; pattern.nnz() + 1];
+                for &p in &positions {
+                    if p != FIXED {
+                        ptr[p as usize + 1] += 1;
+                    }
+                }
+                for k in 0..pattern.nnz() {
+                    ptr[k + 1] += ptr[k];
+                }
+                let mut next = ptr.clone();
+                let mut index = vec![0u32; ptr[pattern.nnz()] as usize];
+                for (local, &p) in positions.iter().enumerate() {
+                    if p != FIXED {
+                        index[next[p as usize] as usize] = local as u32;
+                        next[p as usize] += 1;
+                    }
+                }
+                Gather { ptr, index }
             })
             .collect();
         Assembler {
@@ -127,7 +164,7 @@ impl Assembler {
             full_of_free,
             pattern,
             local_free,
-            scatter,
+            gather,
         }
     }
 
@@ -225,7 +262,6 @@ impl Assembler {
             },
         );
         let free = &self.local_free[t];
-        let scatter = &self.scatter[t];
         let mut energy = 0.0;
         for (e, slot) in work.chunks(stride).enumerate() {
             energy += slot[0];
@@ -240,15 +276,25 @@ impl Assembler {
                     }
                 }
             }
-            if want_hess {
-                let hess = &slot[1 + s..];
-                let positions = &scatter[e * s * s..(e + 1) * s * s];
-                for (value, &p) in hess.iter().zip(positions) {
-                    if p != FIXED {
-                        out.hessian[p as usize] += value;
+        }
+        if want_hess {
+            let gather = &self.gather[t];
+            let ss = s * s;
+            let hessian_offset = 1 + s;
+            out.hessian
+                .par_chunks_mut(4096)
+                .enumerate()
+                .for_each(|(chunk, values)| {
+                    let first = chunk * 4096;
+                    for (k, value) in values.iter_mut().enumerate() {
+                        let p = first + k;
+                        let range = gather.ptr[p] as usize..gather.ptr[p + 1] as usize;
+                        for &local in &gather.index[range] {
+                            let local = local as usize;
+                            *value += work[(local / ss) * stride + hessian_offset + local % ss];
+                        }
                     }
-                }
-            }
+                });
         }
         energy
     }

@@ -115,6 +115,19 @@ impl SparseFactor {
         })
     }
 
+    /// Threads for the numeric factorisation and the triangular solves. faer's parallel
+    /// supernodal factorisation only pays off on large factors: on this project's 2-core
+    /// machine it was 1.9x slower than the sequential one at 0.9M and 1.4M factor values,
+    /// 1.15x slower at 7.2M and 1.34x faster at 34M (see BENCHMARKS.md).
+    fn parallelism(&self) -> faer::Par {
+        const PARALLEL_FROM_FACTOR_VALUES: usize = 12_000_000;
+        if self.values.len() >= PARALLEL_FROM_FACTOR_VALUES {
+            faer::get_global_parallelism()
+        } else {
+            faer::Par::Seq
+        }
+    }
+
     /// Number of stored values in the factor (a measure of fill-in and memory).
     pub fn factor_nnz(&self) -> usize {
         self.values.len()
@@ -122,7 +135,7 @@ impl SparseFactor {
 
     /// Numeric `L L^T`. Returns `Ok(false)` when the matrix is not numerically positive definite.
     pub fn factor_llt(&mut self, pattern: &LowerPattern, values: &[f64]) -> Result<bool> {
-        let par = faer::get_global_parallelism();
+        let par = self.parallelism();
         let mat = SparseColMatRef::new(pattern.symbolic(), values);
         let req = self
             .symbolic
@@ -156,7 +169,7 @@ impl SparseFactor {
     /// or non-finite pivot; the caller checks the resulting direction (an indefinite A still
     /// factors, so inertia is the caller's concern).
     pub fn factor_ldlt(&mut self, pattern: &LowerPattern, values: &[f64]) -> Result<bool> {
-        let par = faer::get_global_parallelism();
+        let par = self.parallelism();
         let mat = SparseColMatRef::new(pattern.symbolic(), values);
         let req = self
             .symbolic
@@ -181,7 +194,7 @@ impl SparseFactor {
 
     /// Solves `A x = rhs` in place with the stored factorisation.
     pub fn solve_in_place(&self, rhs: &mut [f64]) {
-        let par = faer::get_global_parallelism();
+        let par = self.parallelism();
         let n = rhs.len();
         let req = self.symbolic.solve_in_place_scratch::<f64>(1, par);
         let mut mem = MemBuffer::new(req);

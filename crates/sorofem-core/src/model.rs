@@ -954,42 +954,28 @@ impl NewtonProblem for System<'_> {
         self.load_free_norm
     }
 
-    /// Standard: the potential energy. Mixed: half the squared weighted residual of the
+    /// Merit, standard: the potential energy. Mixed: half the squared weighted residual of the
     /// saddle-point system. The pressure is a Lagrange multiplier, so the mixed energy has no
     /// minimum to descend to, and eliminating p through `C p = phi` would amplify the
     /// second-order constraint error of every step by lambda (tiny steps as nu -> 0.5).
-    fn merit(&mut self, z: &mut [f64]) -> f64 {
-        if self.is_mixed() {
-            let g = self.gradient(z);
-            if g.iter().any(|v| !v.is_finite()) {
-                return f64::INFINITY;
-            }
-            return 0.5 * g.iter().map(|v| v * v).sum::<f64>();
-        }
-        let external: f64 = self.load.iter().zip(z.iter()).map(|(f, x)| f * x).sum();
-        let mut energy = self.model.assembler.energy(&self.model.terms(), z) - external;
-        if let Some(step) = &self.step {
-            energy += step.energy(&self.free_values(z), self.model.assembler.pattern());
-        }
-        energy
-    }
-
-    /// Gradient of the energy minus the loads; in the mixed formulation the volume-constraint
+    ///
+    /// Gradient: of the energy minus the loads; in the mixed formulation the volume-constraint
     /// rows (m^3) are multiplied by the pressure weight so that they are forces too.
-    fn gradient(&mut self, z: &[f64]) -> Vec<f64> {
+    fn merit_and_gradient(&mut self, z: &mut [f64]) -> (f64, Vec<f64>) {
         let eval = self
             .model
             .assembler
             .evaluate(&self.model.terms(), z, true, None);
         if !eval.energy.is_finite() {
-            return vec![f64::INFINITY; eval.gradient.len()];
+            return (f64::INFINITY, vec![f64::INFINITY; eval.gradient.len()]);
         }
         let mut g = eval.gradient;
         for (gi, &d) in g.iter_mut().zip(self.model.assembler.full_of_free()) {
             *gi -= self.load[d];
         }
-        if let Some(step) = &self.step {
-            step.add_gradient(&self.free_values(z), self.model.assembler.pattern(), &mut g);
+        let free_values = self.step.as_ref().map(|_| self.free_values(z));
+        if let (Some(step), Some(free)) = (&self.step, &free_values) {
+            step.add_gradient(free, self.model.assembler.pattern(), &mut g);
         }
         if self.is_mixed() {
             let n = self.n_nodes();
@@ -997,8 +983,17 @@ impl NewtonProblem for System<'_> {
             g[len - n..]
                 .iter_mut()
                 .for_each(|v| *v *= self.model.pressure_weight);
+            if g.iter().any(|v| !v.is_finite()) {
+                return (f64::INFINITY, g);
+            }
+            return (0.5 * g.iter().map(|v| v * v).sum::<f64>(), g);
         }
-        g
+        let external: f64 = self.load.iter().zip(z.iter()).map(|(f, x)| f * x).sum();
+        let mut energy = eval.energy - external;
+        if let (Some(step), Some(free)) = (&self.step, &free_values) {
+            energy += step.energy(free, self.model.assembler.pattern());
+        }
+        (energy, g)
     }
 
     fn slope(&self, g: &[f64], d: &[f64]) -> f64 {
