@@ -216,9 +216,11 @@ fn newton_step(
             .rev()
             .take(5)
             .fold(energy, |m, &e| m.max(e));
-        // Start from twice the last accepted step: after a damped step the full Newton step is
-        // rarely acceptable at once, and each rejected trial costs an energy evaluation.
-        let mut t: f64 = (2.0 * report.step_lengths.last().copied().unwrap_or(1.0)).min(1.0);
+        // Always try the full Newton step first. Starting from twice the last accepted step
+        // saves rejected trials (cheap energy evaluations) but costs Newton iterations (a
+        // factorisation each): 15 -> 14 on the hammerbot, 20 -> 16 and 24 -> 19 on the 1 m
+        // cantilevers at 16x4x4 and 48x8x8 cells.
+        let mut t: f64 = 1.0;
         let mut accepted = false;
         let mut trial = z.to_vec();
         for _ in 0..40 {
