@@ -8,6 +8,7 @@ Usage::
     sorofem info MESH [--scale S] [--json]
     sorofem convert IN OUT [--scale S] [--quiet]
     sorofem view SCENE.toml [--port P] [--host H]
+    sorofem schema [--out FILE [--force]]
     sorofem --version
 
 ``run`` writes ``DIR/result.vtu``, ``DIR/summary.json``, ``DIR/shape.png`` and
@@ -31,6 +32,11 @@ as (mu, lambda) and (E, nu), the residual, forward solves and history; control: 
 distance, reachable, forward solves, history) and ``DIR/result.vtu`` (the final equilibrium).
 An estimate that does not converge, or a control target that is not reachable, exits 3
 (the outputs are still written).
+
+``schema`` prints the JSON Schema of scene files (:func:`sorofem.scene.json_schema`), or
+writes it to ``--out FILE``; it never overwrites an existing file unless ``--force`` is given.
+Editors use it to complete and check scene files (a ``#:schema ./scene.schema.json`` first
+line, for VS Code's Even Better TOML or taplo).
 
 Exit codes: 0 success; 2 bad input (scene, mesh or arguments: one ``error: ...`` line on
 stderr); 3 the solver failed (``summary.json`` is still written, with
@@ -122,6 +128,10 @@ def _build_parser() -> argparse.ArgumentParser:
     view.add_argument("scene", type=Path, help="TOML scene file")
     view.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
     view.add_argument("--port", type=int, default=8080, help="port (default 8080)")
+
+    schema = sub.add_parser("schema", help="print the JSON Schema of scene files (for editors)")
+    schema.add_argument("--out", type=Path, metavar="FILE", help="write it to FILE instead of printing it")
+    schema.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
     return parser
 
 
@@ -141,6 +151,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             from .viewer import _cli as _view
 
             return _view(args.scene, host=args.host, port=args.port)
+        if args.command == "schema":
+            return _schema(args)
         return _info(args)
     except (_UsageError, InputError, FileNotFoundError, NotADirectoryError, IsADirectoryError,
             PermissionError) as exc:
@@ -366,7 +378,8 @@ def _inverse(args: argparse.Namespace) -> int:
     if command == "estimate":
         fit = sf.estimate(
             scene.body, scene.target, section["params"], section["x0"], bounds=section["bounds"],
-            method=section["method"], starts=section["starts"], gravity=scene.gravity, tolerance=tolerance,
+            method=section["method"], starts=section["starts"], regions=scene.regions or None,
+            gravity=scene.gravity, tolerance=tolerance,
             max_iterations=solve["max_iterations"], load_steps=solve["load_steps"],
         )
         m = fit.material
@@ -418,6 +431,32 @@ def _inverse(args: argparse.Namespace) -> int:
 
 def _fmt(value: Any) -> str:
     return f"{value:.6g}" if np.ndim(value) == 0 else f"{np.min(value):.6g}..{np.max(value):.6g}"
+
+
+# ---------------------------------------------------------------------------
+# schema
+
+
+def _schema(args: argparse.Namespace) -> int:
+    """``schema``: the scene files' JSON Schema on stdout, or in ``--out FILE`` (never overwritten
+    without ``--force``)."""
+    from .scene import _schema_text
+
+    text = _schema_text()
+    out: Path | None = args.out
+    if out is None:
+        if args.force:
+            raise _UsageError("--force: only with --out FILE (see 'sorofem schema --help')")
+        sys.stdout.write(text)
+        return EXIT_OK
+    if out.is_dir():
+        raise InputError(f"--out: {out} is a folder; expected a file name such as {out / 'scene.schema.json'}")
+    if out.exists() and not args.force:
+        raise InputError(f"--out: {out} exists; pass --force to overwrite it")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text, encoding="utf-8")
+    print(f"wrote {out}")
+    return EXIT_OK
 
 
 # ---------------------------------------------------------------------------

@@ -412,6 +412,57 @@ class Mesh:
         src = f", source='{self.source}'" if self.source is not None else ""
         return f"Mesh(n_nodes={self.n_nodes}, n_tets={self.n_tets}, bounds={fmt(lo)}..{fmt(hi)}{extra}{src})"
 
+    # -- axis permutation ---------------------------------------------------------------
+
+    #: Names accepted by :meth:`transformed`: an old axis, optionally signed.
+    AXIS_NAMES: tuple[str, ...] = ("x", "y", "z", "+x", "+y", "+z", "-x", "-y", "-z")
+
+    def transformed(self, axes: Sequence[str]) -> "Mesh":
+        """A copy with its axes permuted and flipped: new coordinate ``i`` is old axis ``axes[i]``.
+
+        ``axes`` is a signed permutation of the old axes, three of :attr:`AXIS_NAMES`, each of
+        x, y, z once. ``["x", "-z", "y"]`` turns a mesh drawn with y up into one with z up
+        (new y = -old z, new z = old y). Node and element indices are kept. A reflection (an odd
+        number of swaps and sign flips) would invert every tetrahedron: two nodes of each are
+        swapped so that the tets stay positively oriented; :attr:`reoriented` is carried over
+        from this mesh (it lists the tets inverted in the input file, not these).
+
+        Raises
+        ------
+        ParameterError
+            ``axes`` is not a signed permutation of x, y, z.
+
+        Examples
+        --------
+        >>> import sorofem as sf
+        >>> mesh = sf.Mesh.box(size=(0.4, 0.1, 0.02), cells=(4, 1, 1))
+        >>> [float(v) for v in mesh.transformed(["x", "-z", "y"]).bounds()[1]]
+        [0.4, 0.0, 0.1]
+        """
+        names = list(axes) if isinstance(axes, (list, tuple)) else None
+        if (
+            names is None
+            or len(names) != 3
+            or not all(isinstance(a, str) and a in self.AXIS_NAMES for a in names)
+            or sorted(a[-1] for a in names) != ["x", "y", "z"]
+        ):
+            raise ParameterError(
+                "axes: expected a signed permutation of the axes, three of "
+                f"{', '.join(repr(a) for a in self.AXIS_NAMES)} with each of x, y, z once "
+                f"(e.g. ['x', '-z', 'y']), got {axes!r}",
+                "axes",
+            )
+        order = ["xyz".index(name[-1]) for name in names]
+        signs = np.array([-1.0 if name.startswith("-") else 1.0 for name in names])
+        # det = sign of the permutation times the product of the signs; + 0.0 turns -0.0 into 0.0.
+        inversions = sum(order[i] > order[j] for i in range(3) for j in range(i + 1, 3))
+        det = (-1.0) ** inversions * float(np.prod(signs))
+        tets = self._tets if det > 0 else self._tets[:, [0, 2, 1, 3]]
+        mesh = Mesh(self._points[:, order] * signs + 0.0, tets, orientation="reject")
+        mesh._reoriented = self._reoriented
+        mesh.source = self.source
+        return mesh
+
 
 # ---------------------------------------------------------------------------
 # Material
