@@ -281,3 +281,117 @@ def test_bad_dynamics_entries_name_the_key(tmp_path, old, new, key):
     with pytest.raises(sf.SceneError) as info:
         sf.Scene.load(path)
     assert info.value.key == key, str(info.value)
+
+
+# -- progress line ---------------------------------------------------------------------
+
+
+class _FakeTTY:
+    """stderr that says it is a terminal."""
+
+    def __init__(self) -> None:
+        self.text = ""
+
+    def write(self, text: str) -> int:
+        self.text += text
+        return len(text)
+
+    def flush(self) -> None:
+        pass
+
+    def isatty(self) -> bool:
+        return True
+
+
+def _same_trajectory(a, b, atol=1e-12):
+    assert a.n_frames == b.n_frames
+    np.testing.assert_allclose(a.times, b.times, rtol=0, atol=atol)
+    np.testing.assert_allclose(a.positions, b.positions, rtol=0, atol=atol)
+    np.testing.assert_allclose(a.velocities, b.velocities, rtol=0, atol=1e3 * atol)
+    np.testing.assert_allclose(a.kinetic_energy, b.kinetic_energy, rtol=1e-9, atol=atol)
+    np.testing.assert_array_equal(a.iterations, b.iterations)
+    assert a.cutbacks == b.cutbacks
+    assert len(a.cable_points) == len(b.cable_points)
+    for fa, fb in zip(a.cable_points, b.cable_points):
+        for pa, pb in zip(fa, fb):
+            np.testing.assert_allclose(pa, pb, rtol=0, atol=atol)
+
+
+@needs_dynamics
+def test_simulate_with_progress_draws_a_line_and_gives_the_same_trajectory(beam, capsys):
+    two_cables(beam)
+    kwargs = dict(actuation=[Keyframes([[0, 1], [0.1, 0.8]]), None], gravity=GRAVITY, damping=(5.0, 0.01))
+    plain = sf.simulate(beam, 0.01, 10, save_every=3, progress=False, **kwargs)
+    assert capsys.readouterr().err == ""
+    shown = sf.simulate(beam, 0.01, 10, save_every=3, progress=True, **kwargs)
+    err = capsys.readouterr().err
+    assert err.startswith("\r") and err.endswith("\n") and err.count("\n") == 1
+    last = err.rstrip("\n").split("\r")[-1]
+    assert last.startswith("simulate 100%|") and "10/10 steps" in last and "t=0.1 s" in last and "0 cutbacks" in last
+    assert [round(t, 12) for t in shown.times] == [0.0, 0.03, 0.06, 0.09, 0.1]
+    _same_trajectory(plain, shown)
+    assert beam.actuations == [1.0, 0.9]
+
+
+@needs_dynamics
+@pytest.mark.parametrize("save_every, steps", [(1, 7), (3, 10), (4, 12), (50, 9)])
+def test_chunked_integration_saves_the_same_frames(beam, monkeypatch, save_every, steps):
+    """With the line shown the steps run in chunks (here as small as possible: the first chunk
+    is one step, then every chunk is as short as the save points allow)."""
+    import sorofem.dynamics as dynamics
+
+    monkeypatch.setattr(dynamics, "CHUNK_SECONDS", 0.0)
+    calls = []
+    real = dynamics._run_in_chunks
+
+    def spy(run, *args):
+        def counted(n, *rest):
+            calls.append(n)
+            return run(n, *rest)
+        return real(counted, *args)
+
+    monkeypatch.setattr(dynamics, "_run_in_chunks", spy)
+    plain = sf.simulate(beam, 0.01, steps, gravity=GRAVITY, damping=(5.0, 0.0), save_every=save_every, progress=False)
+    chunked = sf.simulate(beam, 0.01, steps, gravity=GRAVITY, damping=(5.0, 0.0), save_every=save_every, progress=True)
+    assert sum(calls) == steps and len(calls) > 1
+    _same_trajectory(plain, chunked)
+
+
+@needs_dynamics
+def test_simulate_progress_is_automatic(beam, monkeypatch, capsys):
+    import sorofem.progress
+
+    sf.simulate(beam, 0.01, 3, gravity=GRAVITY)  # pytest's stderr is not a terminal
+    assert capsys.readouterr().err == ""
+    tty = _FakeTTY()
+    monkeypatch.setattr("sys.stderr", tty)
+    monkeypatch.setattr(sorofem.progress, "DELAY", 0.0)
+    sf.simulate(beam, 0.01, 3, gravity=GRAVITY)
+    assert "3/3 steps" in tty.text and tty.text.endswith("\n")
+    quiet = _FakeTTY()
+    monkeypatch.setattr("sys.stderr", quiet)
+    with sorofem.progress.default(False):  # what a --quiet command line does
+        sf.simulate(beam, 0.01, 3, gravity=GRAVITY)
+    assert quiet.text == ""
+
+
+@needs_dynamics
+def test_progress_with_free_cable_nodes_runs_in_one_piece(silicone, capsys):
+    mesh = sf.Mesh.box(size=(0.1, 0.1, 0.1), cells=(2, 2, 2))
+    body = sf.Body(mesh, silicone)
+    body.fix(np.arange(mesh.n_nodes))
+    body.add_cable(sf.Cable([[0.05, 0.05, 0.01], [0.05, 0.05, -0.05]], 1e3, outside="free", free_node_mass=0.1))
+    plain = sf.simulate(body, 0.005, 40, gravity=GRAVITY, damping=(5.0, 0.0), save_every=10, progress=False)
+    shown = sf.simulate(body, 0.005, 40, gravity=GRAVITY, damping=(5.0, 0.0), save_every=10, progress=True)
+    assert "40/40 steps" in capsys.readouterr().err
+    _same_trajectory(plain, shown, atol=0.0)  # one call: bit for bit
+
+
+def test_chunk_errors_name_the_global_step():
+    from sorofem.dynamics import _shift_step_in_message
+
+    err = sf.ConvergenceError("time step 3 (t = 0.0400 s) did not converge even at dt = 1.563e-4 s; ...",
+                              {"message": "time step 3 (t = 0.0400 s) did not converge"})
+    _shift_step_in_message(err, 20, 0.2)
+    assert str(err).startswith("time step 23 (t = 0.2400 s) did not converge even at dt = 1.563e-4 s")
+    assert err.report["message"] == "time step 23 (t = 0.2400 s) did not converge"

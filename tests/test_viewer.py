@@ -22,7 +22,14 @@ import sorofem as sf
 viser = pytest.importorskip("viser", reason="optional extra sorofem[viewer] (viser) not installed")
 trimesh = pytest.importorskip("trimesh")
 
-from sorofem.viewer import build_view, colour_by_magnitude, rebuild_body  # noqa: E402
+from sorofem.dynamics import Keyframes, has_dynamics  # noqa: E402
+from sorofem.viewer import (  # noqa: E402
+    build_trajectory_view,
+    build_view,
+    colour_by_magnitude,
+    load_frames,
+    rebuild_body,
+)
 
 SCENES = Path(__file__).resolve().parent.parent / "examples" / "scenes"
 
@@ -98,6 +105,182 @@ def test_colour_map() -> None:
 
 
 # ---------------------------------------------------------------------------
+# Playback of a trajectory
+
+needs_dynamics = pytest.mark.skipif(not has_dynamics(), reason="this build of sorofem._core has no Model.simulate")
+
+
+def _pulled_cantilever(steps: int = 30, save_every: int = 3) -> sf.Trajectory:
+    """The cable cantilever pulled to alpha = 0.8 over 0.3 s: 11 frames, 0 .. 0.6 s."""
+    mesh = sf.Mesh.box(size=(0.4, 0.1, 0.1), cells=(8, 2, 2))
+    body = sf.Body(mesh, sf.NeoHookean(youngs_modulus=66e3, poisson_ratio=0.45, density=1080))
+    body.fix(mesh.nodes_on_plane((0, 0, 0), (1, 0, 0)))
+    body.add_cable(sf.Cable.line((0, 0.01, 0.01), (1, 0, 0), 0.4, 10, stiffness=1e5))
+    return sf.simulate(body, 0.02, steps, actuation=Keyframes([[0, 1], [0.3, 0.8]]), gravity=(0, 0, -9.81),
+                       damping=(5.0, 0.01), save_every=save_every, progress=False)
+
+
+def _wait(condition, timeout: float = 10.0) -> bool:
+    deadline = time.time() + timeout
+    while not condition():
+        if time.time() > deadline:
+            return False
+        time.sleep(0.01)
+    return True
+
+
+def _segments(points: np.ndarray) -> np.ndarray:
+    return np.stack([points[:-1], points[1:]], axis=1)
+
+
+@pytest.fixture()
+def trajectory() -> sf.Trajectory:
+    if not has_dynamics():
+        pytest.skip("this build of sorofem._core has no Model.simulate")
+    return _pulled_cantilever()
+
+
+def test_frame_slider_moves_the_vertices_of_the_one_surface(server, trajectory, monkeypatch) -> None:
+    view = build_trajectory_view(trajectory, server)
+    try:
+        surface = view.surface
+        nodes = view.surface_nodes
+        assert view.frames.n_frames == 11 and view.slider.max == 10 and view.frame == 0
+        np.testing.assert_array_equal(surface.vertices, trajectory.positions[0][nodes].astype(np.float32))
+        # Frames must move the existing handles, never add scene nodes.
+        for add in ("add_mesh_simple", "add_glb", "add_point_cloud", "add_line_segments"):
+            monkeypatch.setattr(server.scene, add, lambda *a, **k: pytest.fail("a frame re-created a scene node"))
+        for k in (4, 10, 1):
+            view.slider.value = k  # as a browser drag would
+            assert view.frame == k and view.time == pytest.approx(trajectory.times[k])
+            assert view.surface is surface
+            np.testing.assert_array_equal(surface.vertices, trajectory.positions[k][nodes].astype(np.float32))
+            np.testing.assert_array_equal(view.colours.points, trajectory.positions[k][nodes].astype(np.float32))
+            np.testing.assert_allclose(view.cables[0].points, _segments(trajectory.cable_points[k][0]), atol=1e-6)
+            assert f"t = {trajectory.times[k]:.4g} s" in view.status.content
+        # Colours: one scale over the whole motion; the clamped end is the most displaced.
+        u = np.linalg.norm(trajectory.displacement[:, nodes], axis=2)
+        assert view.vmax == pytest.approx(u.max())
+        np.testing.assert_array_equal(view.colours.colors, colour_by_magnitude(u[1], u.max())[:, :3])
+        assert "alpha 0.9" in view.status.content and "tension" in view.status.content  # frame 1: t = 0.06 s
+    finally:
+        view.close()
+
+
+def test_play_pause_speed_and_loop(server, trajectory) -> None:
+    view = build_trajectory_view(trajectory, server, loop=False)
+    try:
+        last = view.frames.n_frames - 1
+        assert view.play_button.label == "play" and not view.playing
+        view.speed_dropdown.value = "2x"  # the 0.6 s motion in 0.3 s: about 10 ticks at 30 fps
+        assert view.speed == 2.0
+        view.play_button.value = True  # a click
+        assert view.playing and view.play_button.label == "pause"
+        assert _wait(lambda: not view.playing), "the playback did not stop at the end"
+        assert view.frame == last and view.slider.value == last and view.play_button.label == "play"
+        np.testing.assert_array_equal(view.surface.vertices, trajectory.positions[last][view.surface_nodes].astype(np.float32))
+        assert view.frames_shown > 3  # intermediate frames were shown on the way
+
+        # From the last frame, play starts again at the beginning; looping keeps it going.
+        view.loop_checkbox.value = True
+        view.set_speed(0.1)  # slow: frame 1 (t = 0.06 s) after 0.6 s
+        view.play()
+        assert view.frame == 0 and view.playing
+        view.slider.value = 8  # jump while playing: the clock follows the slider
+        assert _wait(lambda: view.frame >= 9 or view.frame < 8, 5.0)
+        view.pause()
+        frame = view.frame
+        time.sleep(0.2)
+        assert view.frame == frame and not view.playing
+        view.set_speed(5.0)  # a 0.66 s cycle (the last frame held one frame spacing) in 0.13 s
+        shown = view.frames_shown
+        seen: list[int] = []
+        view.play()
+        assert _wait(lambda: seen.append(view.frame) or view.frames_shown > shown + 2 * last, 10.0), "no loop"
+        assert sum(b < a for a, b in zip(seen, seen[1:])) >= 2  # went back to the start at least twice
+        assert view.playing  # looped instead of stopping
+        view.pause()
+        with pytest.raises(sf.InputError, match="speed"):
+            view.set_speed(0)
+    finally:
+        view.close()
+    assert view._thread is None
+
+
+def test_playback_of_a_written_pvd(server, trajectory, tmp_path) -> None:
+    trajectory.write_pvd(tmp_path / "run")
+    for source in (tmp_path / "run", tmp_path / "run" / "trajectory.pvd"):
+        frames = load_frames(source)
+        np.testing.assert_allclose(frames.times, trajectory.times)
+        np.testing.assert_allclose(frames.positions, trajectory.positions, atol=1e-12)
+        np.testing.assert_allclose(frames.mesh.points, trajectory.mesh.points, atol=1e-12)
+        assert frames.n_cables == 1 and frames.kinetic_energy is None
+    view = build_trajectory_view(tmp_path / "run", server, speed=3.0)
+    try:
+        assert "3x" in view.speed_dropdown.options and view.speed == 3.0
+        view.slider.value = 7
+        np.testing.assert_allclose(view.surface.vertices, trajectory.positions[7][view.surface_nodes], atol=1e-6)
+        np.testing.assert_allclose(view.cables[0].points, _segments(trajectory.cable_points[7][0]), atol=1e-6)
+    finally:
+        view.close()
+
+
+def test_nothing_to_play(tmp_path) -> None:
+    with pytest.raises(sf.InputError, match="no such file"):
+        load_frames(tmp_path / "missing")
+    with pytest.raises(sf.InputError, match="trajectory.pvd"):
+        load_frames(tmp_path)
+    (tmp_path / "scene.toml").write_text("", encoding="utf-8")
+    with pytest.raises(sf.InputError, match=r"\.pvd"):
+        load_frames(tmp_path / "scene.toml")
+    (tmp_path / "broken.pvd").write_text("<VTKFile><Collection></Collection></VTKFile>", encoding="utf-8")
+    with pytest.raises(sf.InputError, match="no <DataSet>"):
+        load_frames(tmp_path / "broken.pvd")
+
+
+@needs_dynamics
+def test_single_frame_trajectory_does_not_play(server) -> None:
+    traj = _pulled_cantilever(steps=1, save_every=5)
+    assert traj.n_frames == 2
+    single = load_frames(traj)
+    single.times, single.positions, single.cable_points = single.times[:1], single.positions[:1], single.cable_points[:1]
+    view = build_trajectory_view(single, server)
+    view.play()
+    assert not view.playing and view.slider.disabled
+    view.slider.value = 1  # clamped
+    assert view.frame == 0
+
+
+@needs_dynamics
+def test_cli_plays_a_run_folder_and_a_dynamic_scene(tmp_path, trajectory, monkeypatch, capsys) -> None:
+    """``sorofem view`` (viewer._cli) with the serving loop replaced by an immediate stop."""
+    import sorofem.viewer as viewer
+
+    served = []
+
+    def serve_once(server, on_stop=None):
+        served.append(server)
+        if on_stop is not None:
+            on_stop()
+        server.stop()
+
+    monkeypatch.setattr(viewer, "_serve", serve_once)
+    trajectory.write_pvd(tmp_path / "run")
+    assert viewer._cli(tmp_path / "run", port=_free_port()) == 0
+    assert "(11 frames)" in capsys.readouterr().out
+    dynamic = tmp_path / "pull.toml"
+    dynamic.write_text((SCENES / "cable_cantilever.toml").read_text(encoding="utf-8")
+                       + "\n[dynamics]\ndt = 0.02\nsteps = 6\nsave_every = 2\nmass_damping = 5.0\n", encoding="utf-8")
+    assert viewer._cli(dynamic, port=_free_port(), trajectory=True) == 0
+    assert "(4 frames)" in capsys.readouterr().out
+    assert viewer._cli(dynamic, port=_free_port()) == 0  # without --trajectory: the static view
+    assert "frames" not in capsys.readouterr().out
+    with pytest.raises(sf.InputError, match=r"\[dynamics\]"):
+        viewer._cli(SCENES / "cantilever.toml", port=_free_port(), trajectory=True)
+    assert len(served) == 3
+
+
+# ---------------------------------------------------------------------------
 # A real browser: headless Chromium (Debian package) driven by Playwright's Python package.
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -128,3 +311,36 @@ def test_browser_loads_the_view(server) -> None:
             assert view.solves == 2
         finally:
             browser.close()
+
+
+@pytest.mark.skipif(os.environ.get("SOROFEM_BROWSER_TEST") != "1",
+                    reason="real-browser test (~7 s): run by `make test-viewer` (SOROFEM_BROWSER_TEST=1)")
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium executable (apt-get install chromium)")
+def test_browser_plays_a_trajectory(server, trajectory) -> None:
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright Python package not installed")
+    view = build_trajectory_view(trajectory, server, speed=0.5)
+    url = f"http://127.0.0.1:{server.get_port()}"
+    errors: list[str] = []
+    try:
+        with sync_api.sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, headless=True,
+                                        args=["--no-sandbox", "--use-gl=swiftshader", "--enable-unsafe-swiftshader"])
+            try:
+                page = browser.new_page()
+                page.on("pageerror", lambda exc: errors.append(str(exc)))
+                page.goto(url)
+                page.wait_for_selector("canvas", timeout=30_000)
+                page.get_by_text("speed (x real time)").first.wait_for(timeout=30_000)
+                assert _wait(lambda: bool(server.get_clients()), 10.0), "the browser did not connect"
+                # The play button in the page starts the playback on the server.
+                page.get_by_role("button", name="play").first.click()
+                assert _wait(lambda: view.playing, 10.0), "clicking play in the browser did nothing"
+                assert _wait(lambda: view.frame >= 2, 10.0)
+                page.get_by_role("button", name="pause").first.click()
+                assert _wait(lambda: not view.playing, 10.0)
+                page.wait_for_timeout(300)
+            finally:
+                browser.close()
+    finally:
+        view.close()
+    assert not errors, errors

@@ -65,6 +65,7 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import InputError, ParameterError, SolverError
+from .progress import Progress
 from .targets import BoundTarget, Target
 
 __all__ = [
@@ -513,6 +514,12 @@ class _Problem:
         self.evaluations = 0
         self.reg = _regularizer(body, params, regularization)
         self.n_data = sum(sc.target.n_residuals for sc in scenarios)
+        #: Progress line ticked after every forward solve (None: no progress reporting).
+        self.progress: Progress | None = None
+
+    def _tick(self) -> None:
+        if self.progress is not None:
+            self.progress.set(self.forward_solves)
 
     def _solve(self, sc: _Scenario, st: _State) -> NDArray[np.float64]:
         model = self.model
@@ -541,9 +548,11 @@ class _Problem:
                     opts["tolerance"], opts["max_iterations"], steps,
                 )
             except SolverError:  # no convergence, or a singular (unstable) Hessian
+                self._tick()
                 if k == len(attempts) - 1:
                     raise
                 continue
+            self._tick()
             self.newton_iterations += int(out.get("iterations", 0))
             sc.initial = np.asarray(out["positions"], dtype=np.float64)
             return sc.initial
@@ -923,17 +932,25 @@ class _Recorder:
             "time": time.perf_counter() - self.t0,
         }
         self.entries.append(entry)
+        bar = self.problem.progress
+        if bar is not None:
+            shown = f"it {entry['iteration']}"
+            if math.isfinite(loss):
+                shown += f", loss {loss:.4e}, rms {rms:.3g} m"
+            bar.set(self.problem.forward_solves, postfix=shown)
         if self.verbose:
             shown = " ".join(
                 f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={np.array2string(v[:4], precision=5)}"
                 for k, v in values.items()
             )
-            print(
+            line = (
                 f"[start {self.start} it {entry['iteration']:3d}] loss {loss:.6e} rms {rms:.3e} m {shown} "
-                f"solves {entry['forward_solves']} t {entry['time']:.2f} s",
-                file=sys.stderr,
-                flush=True,
+                f"solves {entry['forward_solves']} t {entry['time']:.2f} s"
             )
+            if bar is not None and bar.active:
+                bar.print(line)  # above the progress line
+            else:
+                print(line, file=sys.stderr, flush=True)
         if self.path is not None:
             with self.path.open("a", encoding="utf-8") as fh:
                 fh.write(json.dumps(entry) + "\n")
@@ -1112,6 +1129,7 @@ def estimate(
     verbose: bool = False,
     history_path: str | os.PathLike[str] | None = None,
     resume: bool = False,
+    progress: bool | None = None,
 ) -> FitResult:
     """Fit material parameters so that the body's equilibrium meets a target.
 
@@ -1166,6 +1184,12 @@ def estimate(
         Append each iteration as a JSON line here, as it goes.
     resume
         Read ``history_path`` and start from its best point (no extra starts).
+    progress
+        A progress line on stderr, ticked after every forward solve, with the iteration, the
+        loss and the RMS misfit: ``None`` (default) only when stderr is a terminal and the fit
+        lasts more than half a second, ``True`` always, ``False`` never (see
+        :mod:`sorofem.progress`). The number of solves is not known in advance: the line
+        counts them and shows the elapsed time (no ETA).
 
     Returns
     -------
@@ -1221,9 +1245,13 @@ def estimate(
             start_points += [p.from_user(v, f"starts[{i}]") for i, v in enumerate(starts)]
 
     runs = []
+    bar = Progress(desc=f"estimate ({method})", unit="solves", enabled=progress)
+    problem.progress = bar
     try:
         for k, theta_start in enumerate(start_points):
             p.check(theta_start, f"start {k}")
+            if len(start_points) > 1:
+                bar.desc = f"estimate ({method}) start {k + 1}/{len(start_points)}"
             for sc in scs:  # every start from the same beginning
                 sc.initial = sc.given_initial
             solves_before = problem.forward_solves
@@ -1254,6 +1282,7 @@ def estimate(
         unc = None if fields or J is None else _uncertainty(p.names, theta, p.dtheta_ds(s), r, J[: problem.n_data], problem.n_data)
         results = _final_results(body, material, st, scs, p)
     finally:
+        bar.close()
         problem.restore()
     loss = 0.5 * float(r @ r)
     return FitResult(
@@ -1379,6 +1408,7 @@ def control(
     ftol: float = 1e-14,
     initial: Any = None,
     verbose: bool = False,
+    progress: bool | None = None,
 ) -> ControlResult:
     """Cable actuations that bring a target as close as possible.
 
@@ -1409,6 +1439,12 @@ def control(
     initial
         Positions ``(n_nodes, 3)`` or a :class:`~sorofem.StaticResult` to warm-start the first
         solve from (e.g. the previous control's ``result`` when following a moving target).
+    verbose
+        Print one line per iteration on stderr.
+    progress
+        A progress line on stderr, ticked after every forward solve, with the iteration and
+        the loss: ``None`` (default) only when stderr is a terminal and the search lasts more
+        than half a second, ``True`` always, ``False`` never (see :mod:`sorofem.progress`).
 
     Returns
     -------
@@ -1440,6 +1476,7 @@ def control(
     solve = {"tolerance": solve_tolerance, "max_iterations": max_iterations, "load_steps": load_steps}
     scs = _scenarios(body, target, None if initial is None else [{"initial": initial}], gravity, solve)
     problem = _Problem(body, p, scs)
+    problem.progress = bar = Progress(desc=f"control ({method})", unit="solves", enabled=progress)
     record = _Recorder(problem, verbose, None, 0, t0)
     try:
         s, iters, _, msg = _scipy_minimize(problem, np.clip(np.log(theta0), lo, hi), lo, hi, record, method, max_evaluations, xtol, ftol)
@@ -1447,6 +1484,7 @@ def control(
         st = p.state(alpha)
         results = _final_results(body, body.material, st, scs, p)
     finally:
+        bar.close()
         problem.restore()
     result = results[0]
     bound = scs[0].target

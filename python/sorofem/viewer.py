@@ -1,4 +1,5 @@
-"""Interactive 3-D view of a scene in the browser (``sorofem view SCENE.toml``), built on viser.
+"""Interactive 3-D views in the browser (``sorofem view``), built on viser: a scene's static
+equilibrium with live cable sliders, or the playback of a time integration.
 
 The view shows the deformed boundary surface coloured by displacement magnitude (viridis, scaled
 to the current maximum), the cables as red polylines, the fixed nodes as blue points and,
@@ -7,7 +8,16 @@ alpha and re-solves, warm-started from the last equilibrium (``body.set_actuatio
 then :func:`sorofem.solve_static` with ``initial=`` the last result; a jump that does not
 converge is retried by continuation, :func:`sorofem.actuate`), and a dropdown that switches
 between the standard and the mixed formulation. A scene with ``[dynamics]`` is shown at its
-static equilibrium.
+static equilibrium; to play its motion, simulate it and pass the trajectory to
+:func:`view_trajectory`.
+
+**Playback** (:func:`build_trajectory_view`, :func:`view_trajectory`): a
+:class:`~sorofem.Trajectory` returned by :func:`sorofem.simulate`, or the ``.pvd`` series that
+:meth:`~sorofem.Trajectory.write_pvd` and ``sorofem run`` write, is shown frame by frame with a
+frame slider, a play/pause button, the playback speed (multiples of real time) and a loop
+toggle. Each frame moves the vertices of the one surface mesh, the cables and the
+displacement-coloured surface nodes (one colour scale, 0 .. the largest displacement of the
+whole motion); nothing is re-created.
 
 Needs the optional extra ``pip install "sorofem[viewer]"`` (viser). :func:`build_view` takes any
 ``viser.ViserServer``, so it runs without a browser (that is how it is tested); ``_cli`` starts the
@@ -23,13 +33,24 @@ Examples
 >>> view.sliders[0].value = 0.7     # re-solves, as dragging the slider does  # doctest: +SKIP
 >>> view.result.actuations                                   # doctest: +SKIP
 [0.7]
+
+Play a motion (serves on http://127.0.0.1:8080 until Ctrl-C):
+
+>>> from sorofem.viewer import view_trajectory
+>>> trajectory = sf.simulate(body, dt=0.01, steps=200, gravity=(0, 0, -9.81))  # doctest: +SKIP
+>>> view_trajectory(trajectory)                              # doctest: +SKIP
+>>> view_trajectory("results/run")   # a run's folder, or results/run/trajectory.pvd  # doctest: +SKIP
 """
 
 from __future__ import annotations
 
 import io
+import math
+import numbers
+import os
 import threading
 import time
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -40,10 +61,21 @@ from numpy.typing import NDArray
 from .errors import InputError, SorofemError
 
 if TYPE_CHECKING:
-    from .model import Body, StaticResult
+    from .dynamics import Trajectory
+    from .model import Body, Mesh, StaticResult
     from .scene import Scene
 
-__all__ = ["View", "build_view", "colour_by_magnitude", "rebuild_body"]
+__all__ = [
+    "View",
+    "build_view",
+    "colour_by_magnitude",
+    "rebuild_body",
+    "Frames",
+    "load_frames",
+    "TrajectoryView",
+    "build_trajectory_view",
+    "view_trajectory",
+]
 
 #: Actuation range of the cable sliders (widened to include a scene's own actuation).
 ALPHA_RANGE = (0.3, 1.2)
@@ -51,6 +83,11 @@ ALPHA_STEP = 0.005
 CABLE_COLOUR = (220, 40, 40)
 FIXED_COLOUR = (40, 90, 230)
 REST_COLOUR = (180, 180, 180)
+SURFACE_COLOUR = (120, 170, 215)
+#: Playback speeds offered, in multiples of real time.
+SPEEDS = (0.01, 0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0, 100.0)
+#: Most frames per second the playback sends to the browser (denser frames are skipped).
+PLAYBACK_FPS = 30.0
 
 
 def _require_viser() -> Any:
@@ -317,19 +354,591 @@ def build_view(scene: "Scene", server: Any, *, alpha_range: tuple[float, float] 
     return view
 
 
-def _cli(scene_path: Path, host: str = "127.0.0.1", port: int = 8080) -> int:
-    """``sorofem view``: serve the view until interrupted (Ctrl-C); returns the exit code 0."""
-    from .scene import Scene
+# ---------------------------------------------------------------------------
+# Playback of a time integration
 
+
+@dataclass
+class Frames:
+    """The saved frames of a motion, as :func:`build_trajectory_view` plays them.
+
+    Attributes
+    ----------
+    times
+        ``(f,)`` time of each frame, s.
+    positions
+        ``(f, n_nodes, 3)`` node positions, m.
+    mesh
+        The rest mesh (its boundary is the surface shown).
+    cable_points
+        Per frame, one ``(k, 3)`` array per cable, m (empty lists without cables).
+    fixed_nodes
+        Indices of the supported nodes (empty when read from a ``.pvd``, which does not record
+        them).
+    kinetic_energy
+        ``(f,)`` J, or None (not in a ``.pvd``).
+    actuation
+        ``(f, n_cables)`` alpha in force at each frame, or None (not in a ``.pvd``).
+    trajectory
+        The :class:`~sorofem.Trajectory` they come from, if any.
+    source
+        A label: the ``.pvd`` path or ``"trajectory"``.
+    """
+
+    times: NDArray[np.float64]
+    positions: NDArray[np.float64]
+    mesh: "Mesh"
+    cable_points: list[list[NDArray[np.float64]]]
+    fixed_nodes: NDArray[np.int64]
+    kinetic_energy: NDArray[np.float64] | None = None
+    actuation: NDArray[np.float64] | None = None
+    trajectory: "Trajectory | None" = None
+    source: str = "trajectory"
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.times.size)
+
+    @property
+    def n_cables(self) -> int:
+        return len(self.cable_points[0]) if self.cable_points else 0
+
+    @classmethod
+    def from_trajectory(cls, trajectory: "Trajectory", source: str = "trajectory") -> "Frames":
+        """The frames of a :class:`~sorofem.Trajectory` (no copy of the positions)."""
+        n_cables = len(trajectory.body.cables)
+        actuation = None
+        if n_cables:
+            steps = np.rint(trajectory.times / trajectory.dt).astype(np.int64) - 1
+            initial = np.asarray(trajectory._initial_actuation, dtype=np.float64).reshape(1, n_cables)
+            table = np.vstack([initial, trajectory.actuation.reshape(-1, n_cables)])
+            actuation = table[np.clip(steps + 1, 0, len(table) - 1)]
+        return cls(
+            times=trajectory.times, positions=trajectory.positions, mesh=trajectory.mesh,
+            cable_points=trajectory.cable_points if n_cables else [[] for _ in range(trajectory.n_frames)],
+            fixed_nodes=trajectory.body.fixed_nodes, kinetic_energy=trajectory.kinetic_energy,
+            actuation=actuation, trajectory=trajectory, source=source,
+        )
+
+    @classmethod
+    def read_pvd(cls, path: str | os.PathLike[str]) -> "Frames":
+        """Read a ``.pvd`` time series written by :meth:`sorofem.Trajectory.write_pvd` (or
+        ``sorofem run`` with ``[dynamics]``): one ``.vtu`` per frame with the tetrahedra and,
+        after the nodes, the cable points joined by line cells.
+
+        The rest shape is the first frame's points minus its ``displacement`` point data (the
+        first frame itself when there is none).
+
+        Raises
+        ------
+        InputError
+            The file or a frame is missing or unreadable, has no tetrahedra, or the frames do
+            not have the same points.
+        """
+        import meshio
+
+        from .model import Mesh
+
+        path = Path(path)
+        try:
+            root = ET.parse(path).getroot()
+        except (OSError, ET.ParseError) as exc:
+            raise InputError(f"{path}: cannot read the .pvd collection ({exc})") from None
+        datasets = root.findall("./Collection/DataSet")
+        if not datasets:
+            raise InputError(f"{path}: no <DataSet> entries in the .pvd collection")
+        times, positions, cable_points = [], [], []
+        tets = chains = None
+        rest = None
+        n = n_points = 0
+        for i, entry in enumerate(datasets):
+            file = entry.get("file")
+            if not file:
+                raise InputError(f"{path}: <DataSet> {i} has no file attribute")
+            frame_path = path.parent / file
+            try:
+                frame = meshio.read(frame_path)
+            except Exception as exc:  # noqa: BLE001 - meshio raises many kinds
+                raise InputError(f"{path}: frame {i} ({frame_path}) cannot be read: {exc}") from None
+            try:
+                times.append(float(entry.get("timestep", i)))
+            except ValueError:
+                raise InputError(f"{path}: <DataSet> {i} has timestep={entry.get('timestep')!r}, not a number") from None
+            points = np.asarray(frame.points, dtype=np.float64)
+            if tets is None:
+                tet_blocks = [b.data for b in frame.cells if b.type == "tetra"]
+                if not tet_blocks:
+                    raise InputError(f"{path}: frame 0 ({frame_path}) has no tetrahedra")
+                tets = np.vstack(tet_blocks).astype(np.int64)
+                lines = [b.data for b in frame.cells if b.type == "line"]
+                lines_arr = np.vstack(lines).astype(np.int64) if lines else np.zeros((0, 2), dtype=np.int64)
+                n = int(lines_arr.min()) if lines_arr.size else len(points)
+                chains = _chains(lines_arr)
+                n_points = len(points)
+                displacement = frame.point_data.get("displacement")
+                rest = points[:n] - (0.0 if displacement is None else np.asarray(displacement, dtype=np.float64)[:n])
+            elif len(points) != n_points:
+                raise InputError(f"{path}: frame {i} has {len(points)} points, frame 0 has {n_points}")
+            positions.append(points[:n])
+            cable_points.append([points[chain] for chain in chains])
+        assert tets is not None and rest is not None
+        return cls(
+            times=np.array(times), positions=np.stack(positions), mesh=Mesh(rest, tets),
+            cable_points=cable_points, fixed_nodes=np.zeros(0, dtype=np.int64), source=str(path),
+        )
+
+
+def _chains(lines: NDArray[np.int64]) -> list[NDArray[np.int64]]:
+    """Point indices of each polyline in a list of line cells (consecutive cells sharing an end
+    form one polyline, as write_pvd writes the cables)."""
+    chains: list[list[int]] = []
+    for a, b in lines.tolist():
+        if chains and chains[-1][-1] == a:
+            chains[-1].append(b)
+        else:
+            chains.append([a, b])
+    return [np.array(c, dtype=np.int64) for c in chains]
+
+
+def load_frames(source: "Trajectory | Frames | str | os.PathLike[str]") -> Frames:
+    """The frames to play from a :class:`~sorofem.Trajectory`, a ``.pvd`` file, or a folder
+    holding ``trajectory.pvd`` (the ``--out`` folder of ``sorofem run``) or exactly one
+    ``.pvd``.
+
+    Raises
+    ------
+    InputError
+        Nothing to play at ``source``.
+    """
+    from .dynamics import Trajectory
+
+    if isinstance(source, Frames):
+        return source
+    if isinstance(source, Trajectory):
+        return Frames.from_trajectory(source)
+    if not isinstance(source, (str, os.PathLike)):
+        raise InputError(f"expected a sorofem.Trajectory, a .pvd file or a folder, got {type(source).__name__}")
+    path = Path(source)
+    if path.is_dir():
+        candidates = [path / "trajectory.pvd"] if (path / "trajectory.pvd").is_file() else sorted(path.glob("*.pvd"))
+        if len(candidates) != 1:
+            found = ", ".join(c.name for c in candidates) or "none"
+            raise InputError(f"{path}: expected trajectory.pvd or exactly one .pvd file in the folder, found {found}")
+        path = candidates[0]
+    elif not path.is_file():
+        raise InputError(f"{path}: no such file or folder")
+    if path.suffix.lower() != ".pvd":
+        raise InputError(f"{path}: expected a .pvd time series (written by Trajectory.write_pvd or sorofem run)")
+    return Frames.read_pvd(path)
+
+
+def _speed_label(speed: float) -> str:
+    return f"{speed:g}x"
+
+
+@dataclass
+class TrajectoryView:
+    """The playback :func:`build_trajectory_view` put on a server: GUI handles and state.
+
+    Setting ``slider.value`` shows that frame (as dragging the slider does); :meth:`play`,
+    :meth:`pause` and :meth:`show` drive it from Python.
+
+    Attributes
+    ----------
+    frames
+        What is played.
+    frame
+        Index of the frame shown.
+    playing
+        Whether the playback runs.
+    speed
+        Playback speed, multiples of real time (1: one simulated second per second).
+    loop
+        Start again at the end (else stop on the last frame).
+    surface
+        The surface mesh handle; its ``vertices`` are the shown frame's surface node positions.
+    colours
+        Surface nodes coloured by displacement magnitude (a point cloud handle).
+    cables
+        One line-segments handle per cable.
+    slider, play_button, speed_dropdown, loop_checkbox, status
+        The GUI handles.
+    frames_shown
+        How many frames have been drawn (the initial one included).
+    """
+
+    server: Any
+    frames: Frames
+    surface_faces: NDArray[np.int64]
+    surface_nodes: NDArray[np.int64]
+    vmax: float
+    frame: int = 0
+    playing: bool = False
+    speed: float = 1.0
+    loop: bool = True
+    surface: Any = None
+    colours: Any = None
+    cables: list[Any] = field(default_factory=list)
+    rest: Any = None
+    slider: Any = None
+    play_button: Any = None
+    speed_dropdown: Any = None
+    loop_checkbox: Any = None
+    status: Any = None
+    frames_shown: int = 0
+    _lock: threading.RLock = field(default_factory=threading.RLock, repr=False)
+    _thread: threading.Thread | None = field(default=None, repr=False)
+    _closed: bool = field(default=False, repr=False)
+
+    @property
+    def surface_vertices(self) -> NDArray[np.float64]:
+        """Positions of the surface nodes in the frame shown, ``(k, 3)``, m."""
+        return self.frames.positions[self.frame][self.surface_nodes]
+
+    @property
+    def time(self) -> float:
+        """Time of the frame shown, s."""
+        return float(self.frames.times[self.frame])
+
+    # -- frames ----------------------------------------------------------------------
+
+    def _colours(self, frame: int) -> NDArray[np.uint8]:
+        displacement = self.frames.positions[frame][self.surface_nodes] - self.frames.mesh.points[self.surface_nodes]
+        return colour_by_magnitude(np.linalg.norm(displacement, axis=1), self.vmax)[:, :3]
+
+    def _cable_segments(self, frame: int, c: int) -> NDArray[np.float32]:
+        points = self.frames.cable_points[frame][c]
+        return np.stack([points[:-1], points[1:]], axis=1).astype(np.float32)
+
+    def show(self, frame: int) -> None:
+        """Show frame ``frame`` (clamped to the range): move the surface, the coloured nodes
+        and the cables, and update the status. Does not move the slider (set ``slider.value``
+        to do both)."""
+        with self._lock:
+            frame = min(max(int(frame), 0), self.frames.n_frames - 1)
+            self.frame = frame
+            if self.surface is not None:
+                self.surface.vertices = self.surface_vertices.astype(np.float32)
+            if self.colours is not None:
+                self.colours.points = self.surface_vertices.astype(np.float32)
+                self.colours.colors = self._colours(frame)
+            for c, handle in enumerate(self.cables):
+                handle.points = self._cable_segments(frame, c)
+            if self.status is not None:
+                self.status.content = self._summary()
+            self.frames_shown += 1
+
+    def _summary(self) -> str:
+        f, k = self.frames, self.frame
+        u = np.linalg.norm(f.positions[k] - f.mesh.points, axis=1).max(initial=0.0)
+        lines = [f"frame {k} / {f.n_frames - 1}, **t = {f.times[k]:.4g} s**",
+                 f"max |u| = {u * 1e3:.3g} mm (colours 0 .. {self.vmax * 1e3:.3g} mm over the motion)"]
+        if f.kinetic_energy is not None:
+            lines.append(f"kinetic energy {f.kinetic_energy[k]:.3e} J")
+        if f.actuation is not None:
+            tensions = f.trajectory.cable_tensions(k) if f.trajectory is not None else None
+            for c in range(f.n_cables):
+                text = f"cable {c}: alpha {f.actuation[k, c]:.3f}"
+                if tensions is not None and tensions[c].size:
+                    text += f", tension {tensions[c].min():.3g} .. {tensions[c].max():.3g} N"
+                lines.append(text)
+        return "  \n".join(lines)
+
+    # -- playback --------------------------------------------------------------------
+
+    def _set_frame(self, frame: int) -> None:
+        """Move the slider (which shows the frame through its callback) or show directly."""
+        if self.slider is not None and int(round(self.slider.value)) != frame:
+            self.slider.value = frame
+        elif frame != self.frame or self.frames_shown == 0:
+            self.show(frame)
+
+    def _set_button(self) -> None:
+        if self.play_button is not None:
+            self.play_button.label = "pause" if self.playing else "play"
+            self.play_button.icon = "player-pause" if self.playing else "player-play"
+
+    def play(self) -> None:
+        """Start (or resume) the playback; from the first frame if the last one is shown."""
+        with self._lock:
+            if self._closed or self.playing or self.frames.n_frames < 2:
+                return
+            if self.frame >= self.frames.n_frames - 1:
+                self._set_frame(0)
+            self.playing = True
+            self._set_button()
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._run, name="sorofem-playback", daemon=True)
+                self._thread.start()
+
+    def pause(self) -> None:
+        """Stop the playback on the frame shown."""
+        with self._lock:
+            self.playing = False
+            self._set_button()
+
+    def toggle(self) -> None:
+        """Play if paused, pause if playing (the button)."""
+        if self.playing:
+            self.pause()
+        else:
+            self.play()
+
+    def set_speed(self, speed: float) -> None:
+        """Playback speed, multiples of real time (> 0)."""
+        if isinstance(speed, bool) or not (isinstance(speed, numbers.Real) and math.isfinite(speed) and speed > 0):
+            raise InputError(f"speed: expected a number > 0 (multiples of real time), got {speed!r}")
+        with self._lock:
+            self.speed = float(speed)
+
+    def close(self) -> None:
+        """Stop the playback thread (the server is the caller's to stop)."""
+        with self._lock:
+            self._closed = True
+            self.playing = False
+            thread = self._thread
+        if thread is not None and thread is not threading.current_thread():
+            thread.join()
+
+    def _run(self) -> None:
+        """The playback thread: advances a clock by ``speed`` times the real time elapsed and
+        shows the last frame at or before it, at most PLAYBACK_FPS times a second; a frame
+        picked on the slider meanwhile restarts the clock there. At the end (the last frame is
+        held for the median frame spacing) it starts again or stops."""
+        times = self.frames.times
+        spacing = np.diff(times)
+        hold = float(np.median(spacing)) if spacing.size else 0.0
+        last_index = len(times) - 1
+        with self._lock:
+            clock, shown = float(times[self.frame]), self.frame
+        before = time.perf_counter()
+        while True:
+            with self._lock:
+                if not self.playing or self._closed:
+                    self._thread = None
+                    return
+                now = time.perf_counter()
+                if self.frame != shown:  # moved on the slider
+                    clock = float(times[self.frame])
+                clock += (now - before) * self.speed
+                before = now
+                if clock >= times[-1] + hold:
+                    if self.loop:  # wrap around (several times over at a high speed)
+                        clock = float(times[0]) + (clock - float(times[0])) % (float(times[-1]) + hold - float(times[0]))
+                        k = min(max(int(np.searchsorted(times, clock, side="right")) - 1, 0), last_index)
+                        self._set_frame(k)
+                    else:
+                        self._set_frame(last_index)
+                        self.playing = False
+                        self._set_button()
+                        self._thread = None
+                        return
+                else:
+                    k = min(max(int(np.searchsorted(times, clock, side="right")) - 1, 0), last_index)
+                    if k != self.frame:
+                        self._set_frame(k)
+                shown = self.frame
+            time.sleep(1.0 / PLAYBACK_FPS)
+
+
+def build_trajectory_view(
+    source: "Trajectory | Frames | str | os.PathLike[str]",
+    server: Any,
+    *,
+    speed: float = 1.0,
+    loop: bool = True,
+    play: bool = False,
+) -> TrajectoryView:
+    """Put the playback of a motion on ``server`` (a ``viser.ViserServer``).
+
+    Parameters
+    ----------
+    source
+        A :class:`~sorofem.Trajectory`, a ``.pvd`` file written by
+        :meth:`~sorofem.Trajectory.write_pvd`, or a folder with ``trajectory.pvd`` (see
+        :func:`load_frames`).
+    server
+        Where to draw; nothing is started or blocked here.
+    speed
+        Initial playback speed, multiples of real time.
+    loop
+        Initial state of the loop toggle.
+    play
+        Start playing at once.
+
+    Returns
+    -------
+    TrajectoryView
+        Setting ``view.slider.value = k`` shows frame ``k`` exactly as dragging the slider does;
+        ``view.play()`` / ``view.pause()`` as the button; ``view.close()`` stops the playback
+        thread.
+
+    Raises
+    ------
+    InputError
+        Nothing to play at ``source``, or a bad ``speed``.
+    """
+    frames = load_frames(source)
+    mesh = frames.mesh
+    faces = mesh.boundary_faces()
+    nodes = np.unique(faces)
+    remap = np.full(mesh.n_nodes, -1, dtype=np.int64)
+    remap[nodes] = np.arange(nodes.size)
+    moved = frames.positions[:, nodes] - mesh.points[nodes]
+    vmax = float(np.linalg.norm(moved, axis=2).max(initial=0.0))
+    view = TrajectoryView(server=server, frames=frames, surface_faces=remap[faces], surface_nodes=nodes, vmax=vmax,
+                          loop=bool(loop))
+    view.set_speed(speed)
+
+    lo = frames.positions.reshape(-1, 3).min(axis=0)
+    hi = frames.positions.reshape(-1, 3).max(axis=0)
+    size = float(np.linalg.norm(hi - lo)) or 1.0
+    centre = 0.5 * (lo + hi)
+    server.scene.set_up_direction("+z")
+    server.initial_camera.look_at = tuple(centre)
+    server.initial_camera.position = tuple(centre + size * np.array([0.35, -1.1, 0.55]))
+    first = frames.positions[0][nodes].astype(np.float32)
+    view.surface = server.scene.add_mesh_simple("/motion/surface", first, view.surface_faces, color=SURFACE_COLOUR,
+                                                side="double")
+    view.colours = server.scene.add_point_cloud(
+        "/motion/displacement", first, view._colours(0), point_size=0.008 * size, point_shape="circle",
+        precision="float32",
+    )
+    view.rest = server.scene.add_mesh_simple(
+        "/motion/rest", mesh.points[nodes].astype(np.float32), view.surface_faces, color=REST_COLOUR,
+        wireframe=True, visible=False,
+    )
+    if frames.fixed_nodes.size:
+        server.scene.add_point_cloud(
+            "/motion/fixed", mesh.points[frames.fixed_nodes].astype(np.float32), FIXED_COLOUR,
+            point_size=0.01 * size, point_shape="circle", precision="float32",
+        )
+    for c in range(frames.n_cables):
+        view.cables.append(server.scene.add_line_segments(
+            f"/motion/cables/{c}", view._cable_segments(0, c), CABLE_COLOUR, thickness=3.0, thickness_units="screen",
+        ))
+
+    gui = server.gui
+    name = Path(frames.source).name if frames.source != "trajectory" else "trajectory"
+    gui.add_markdown(f"**{name}**: {mesh.n_nodes} nodes, {mesh.n_tets} tets, {frames.n_cables} cable(s), "
+                     f"{frames.n_frames} frames, t = {frames.times[0]:.4g} .. {frames.times[-1]:.4g} s")
+    last = frames.n_frames - 1
+    view.slider = gui.add_slider("frame", min=0, max=max(last, 1), step=1, initial_value=0, disabled=last < 1,
+                                 hint="saved frame; its time is in the status below")
+    view.slider.on_update(lambda event: view.show(int(round(event.target.value))))
+    view.play_button = gui.add_button("play", icon="player-play", disabled=last < 1)
+    view.play_button.on_click(lambda _: view.toggle())
+    options = sorted(set(SPEEDS) | {view.speed})
+    view.speed_dropdown = gui.add_dropdown(
+        "speed (x real time)", [_speed_label(v) for v in options], initial_value=_speed_label(view.speed),
+    )
+    view.speed_dropdown.on_update(lambda event: view.set_speed(float(event.target.value.rstrip("x"))))
+    view.loop_checkbox = gui.add_checkbox("loop", initial_value=view.loop)
+
+    def _set_loop(event: Any) -> None:
+        view.loop = bool(event.target.value)
+
+    view.loop_checkbox.on_update(_set_loop)
+    wireframe = gui.add_checkbox("wireframe (see the cables)", initial_value=False)
+    coloured = gui.add_checkbox("colour the nodes by |u|", initial_value=True)
+    show_rest = gui.add_checkbox("show rest shape", initial_value=False)
+
+    def _toggle(_: Any) -> None:
+        view.surface.wireframe = wireframe.value
+        view.colours.visible = coloured.value
+        view.rest.visible = show_rest.value
+
+    for box in (wireframe, coloured, show_rest):
+        box.on_update(_toggle)
+    view.status = gui.add_markdown("")
+    view.show(0)
+    if play:
+        view.play()
+    return view
+
+
+def view_trajectory(
+    source: "Trajectory | Frames | str | os.PathLike[str]",
+    *,
+    host: str = "127.0.0.1",
+    port: int = 8080,
+    speed: float = 1.0,
+    loop: bool = True,
+    play: bool = True,
+    block: bool = True,
+) -> TrajectoryView:
+    """Serve the playback of a motion at ``http://host:port`` (see :func:`build_trajectory_view`).
+
+    With ``block=True`` (scripts) it serves until Ctrl-C, then stops the server; with
+    ``block=False`` (Jupyter, an interactive session) it returns at once and the server runs
+    in the background until ``view.server.stop()``.
+
+    Examples
+    --------
+    >>> trajectory = sf.simulate(body, 0.01, 200, gravity=(0, 0, -9.81), damping=(2.0, 0.0))  # doctest: +SKIP
+    >>> view = view_trajectory(trajectory, speed=0.5, block=False)    # doctest: +SKIP
+    >>> view.slider.value = 10                                         # doctest: +SKIP
+    """
     viser = _require_viser()
-    scene = Scene.load(scene_path)
     server = viser.ViserServer(host=host, port=port, verbose=False)
     try:
-        build_view(scene, server)
-        print(f"sorofem view: {scene_path} at http://{host}:{server.get_port()} (Ctrl-C to stop)", flush=True)
+        view = build_trajectory_view(source, server, speed=speed, loop=loop, play=play)
+    except BaseException:
+        server.stop()
+        raise
+    print(f"sorofem view: {view.frames.source} ({view.frames.n_frames} frames) at http://{host}:{server.get_port()}"
+          + (" (Ctrl-C to stop)" if block else ""), flush=True)
+    if block:
+        _serve(server, view.close)
+    return view
+
+
+def _serve(server: Any, on_stop: Any = None) -> None:
+    """Wait until Ctrl-C, then stop the server."""
+    try:
         while True:
             time.sleep(1.0)
     except KeyboardInterrupt:
-        return 0
+        pass
     finally:
+        if on_stop is not None:
+            on_stop()
         server.stop()
+
+
+def _cli(path: Path, host: str = "127.0.0.1", port: int = 8080, trajectory: bool = False) -> int:
+    """``sorofem view PATH``: serve a view until interrupted (Ctrl-C); returns the exit code 0.
+
+    ``PATH`` is a scene (its static equilibrium with cable sliders; with ``trajectory=True`` its
+    ``[dynamics]`` are simulated and played), a ``.pvd`` time series, or a folder holding
+    ``trajectory.pvd`` (``sorofem run``'s ``--out`` folder), which is played.
+    """
+    from .scene import Scene
+
+    viser = _require_viser()
+    path = Path(path)
+    playback = path.is_dir() or path.suffix.lower() == ".pvd"
+    if playback:
+        source: Any = load_frames(path)
+    else:
+        scene = Scene.load(path)
+        if trajectory:
+            if scene.dynamics is None:
+                raise InputError(f"{path}: --trajectory needs a [dynamics] table in the scene")
+            source = Frames.from_trajectory(scene.simulate(), source=str(path))
+    server = viser.ViserServer(host=host, port=port, verbose=False)
+    on_stop = None
+    try:
+        if playback or trajectory:
+            view = build_trajectory_view(source, server, play=True)
+            on_stop = view.close
+            what = f"{path} ({view.frames.n_frames} frames)"
+        else:
+            build_view(scene, server)
+            what = str(path)
+    except BaseException:
+        server.stop()
+        raise
+    print(f"sorofem view: {what} at http://{host}:{server.get_port()} (Ctrl-C to stop)", flush=True)
+    _serve(server, on_stop)
+    return 0
