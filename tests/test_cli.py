@@ -166,3 +166,20 @@ def test_quality_of_regular_tet():
 
     regular = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], dtype=float)
     assert tet_quality(regular, np.array([[0, 1, 2, 3]]))[0] == pytest.approx(1.0)
+
+
+def test_quiet_switches_the_progress_line_off(box_scene, tmp_path, monkeypatch):
+    """`--quiet` makes the automatic progress choice "never" for the whole command."""
+    from sorofem import progress
+
+    seen = []
+    real_run = __import__("sorofem.cli", fromlist=["_run"])._run
+
+    def spy(args):
+        seen.append(progress._DEFAULT.get())
+        return real_run(args)
+
+    monkeypatch.setattr("sorofem.cli._run", spy)
+    assert main(["run", str(box_scene), "--out", str(tmp_path / "a"), "--quiet"]) == 0
+    assert main(["run", str(box_scene), "--out", str(tmp_path / "b")]) == 0
+    assert seen == [False, None]

@@ -7,7 +7,7 @@ Usage::
     sorofem control SCENE.toml --out DIR [--quiet] [--json]
     sorofem info MESH [--scale S] [--json]
     sorofem convert IN OUT [--scale S] [--quiet]
-    sorofem view SCENE.toml [--port P] [--host H]
+    sorofem view SCENE.toml | RUN_DIR | FILE.pvd [--trajectory] [--port P] [--host H]
     sorofem schema [--out FILE [--force]]
     sorofem --version
 
@@ -125,7 +125,9 @@ def _build_parser() -> argparse.ArgumentParser:
     convert.add_argument("--quiet", action="store_true", help="print nothing on success")
 
     view = sub.add_parser("view", help="interactive 3-D view in the browser (needs sorofem[viewer])")
-    view.add_argument("scene", type=Path, help="TOML scene file")
+    view.add_argument("scene", type=Path,
+                      help="TOML scene file, or a .pvd / the --out folder of a dynamic run (played back)")
+    view.add_argument("--trajectory", action="store_true", help="simulate the scene's [dynamics] and play it")
     view.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
     view.add_argument("--port", type=int, default=8080, help="port (default 8080)")
 
@@ -139,21 +141,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code (see the module docstring)."""
     try:
         args = _build_parser().parse_args(argv)
-        if args.command == "run":
-            return _run(args)
-        if args.command in ("estimate", "control"):
-            return _inverse(args)
-        if args.command == "convert":
-            from .convert import _cli as _convert
+        from .progress import default as progress_default
 
-            return _convert(args.input, args.output, args.scale, quiet=args.quiet)
-        if args.command == "view":
-            from .viewer import _cli as _view
-
-            return _view(args.scene, host=args.host, port=args.port)
-        if args.command == "schema":
-            return _schema(args)
-        return _info(args)
+        # --quiet silences the progress line too; otherwise it shows only on a terminal.
+        with progress_default(False if getattr(args, "quiet", False) else None):
+            return _dispatch(args)
     except (_UsageError, InputError, FileNotFoundError, NotADirectoryError, IsADirectoryError,
             PermissionError) as exc:
         print(f"error: {_one_line(exc)}", file=sys.stderr)
@@ -171,6 +163,25 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("error: unexpected internal error (a bug; please report it with the traceback above)",
               file=sys.stderr)
         return EXIT_UNEXPECTED
+
+
+def _dispatch(args: argparse.Namespace) -> int:
+    """Runs the parsed command; errors propagate to :func:`main`."""
+    if args.command == "run":
+        return _run(args)
+    if args.command in ("estimate", "control"):
+        return _inverse(args)
+    if args.command == "convert":
+        from .convert import _cli as _convert
+
+        return _convert(args.input, args.output, args.scale, quiet=args.quiet)
+    if args.command == "view":
+        from .viewer import _cli as _view
+
+        return _view(args.scene, host=args.host, port=args.port, trajectory=args.trajectory)
+    if args.command == "schema":
+        return _schema(args)
+    return _info(args)
 
 
 def _one_line(exc: BaseException) -> str:
