@@ -64,7 +64,8 @@ def solve_returns_cable_state() -> bool:
         ({"snap_tolerance": -1e-3}, "snap_tolerance"),
         ({"outside": "ignore"}, "outside"),
         ({"free_node_mass": -0.1}, "free_node_mass"),
-        ({"damping": 0.1}, "damping"),
+        ({"damping": -0.1}, "damping"),
+        ({"damping": "viscous"}, "damping"),
     ],
 )
 def test_cable_parameter_errors_name_the_parameter(kwargs, parameter):
@@ -349,3 +350,61 @@ def test_run_scene_with_cables(tmp_path):
     assert second["placements"] == ["embedded", "embedded", "snapped"]
     assert second["placement_counts"]["max_snap_distance"] == pytest.approx(0.001, rel=0.05)
     assert (tmp_path / "out" / "cables.vtu").is_file()
+
+
+@pytest.mark.parametrize("dashpot", [0.0, 0.8])
+def test_cable_dashpot_follows_the_implicit_euler_oscillator(silicone, dashpot):
+    """A 0.1 kg free node hanging from a world anchor on one taut segment (k = 100 N/m, dashpot
+    c) is the oscillator m L'' = m g - k (L - alpha l - w/2) - c L'. Its implicit Euler
+    recursion, solved here in closed form per step, must match the simulated free node."""
+    mesh = sf.Mesh.box(size=(0.1, 0.1, 0.1), cells=(1, 1, 1))
+    body = sf.Body(mesh, silicone)
+    body.fix(np.arange(mesh.n_nodes))
+    rest_length, stiffness, alpha, mass, g = 0.1, 100.0, 0.85, 0.1, 9.81
+    cable = sf.Cable([[0.2, 0.05, 0.05], [0.2, 0.05, 0.05 - rest_length]], stiffness, alpha, anchor_first=True,
+                     outside="free", free_node_mass=mass, damping=dashpot)
+    body.add_cable(cable)
+    h, steps = 2e-3, 500
+    trajectory = sf.simulate(body, h, steps, gravity=(0, 0, -g), tolerance=1e-12)
+    simulated = np.array([frame[0][1, 2] for frame in trajectory.cable_points])
+    length, velocity, expected = rest_length, 0.0, [rest_length]
+    width = cable.transition * rest_length
+    for _ in range(steps):
+        new = (mass * (length + h * velocity) / h**2 + dashpot * length / h
+               + stiffness * (alpha * rest_length + width / 2) + mass * g) / (mass / h**2 + dashpot / h + stiffness)
+        length, velocity = new, (new - length) / h
+        expected.append(length)
+    expected_z = 0.05 - np.array(expected)
+    # Taut throughout (the recursion assumes it): the stretch stays above the transition.
+    assert np.all(np.array(expected) - alpha * rest_length > width)
+    np.testing.assert_allclose(simulated, expected_z, rtol=0, atol=1e-9)
+    # Over five periods (2 pi sqrt(m / k) = 0.2 s) the swing decays by implicit Euler's own
+    # damping (|1 / (1 + i h omega)|^400 = 0.45) and, with the dashpot (damping ratio
+    # c / (2 sqrt(k m)) = 0.13), by a further exp(-0.13 omega 0.8 s) = 0.04.
+    period = int(round(2 * np.pi * np.sqrt(mass / stiffness) / h))
+    decay = np.ptp(simulated[-period:]) / np.ptp(simulated[:period])
+    print(f"dashpot {dashpot} N s/m: swing decay over five periods {decay:.3f}")
+    assert (decay < 0.05) if dashpot > 0 else (decay > 0.3), decay
+
+
+def test_anchor_reaction_closes_the_force_balance(silicone):
+    """A clamped beam pulled towards a world anchor beyond its tip, under gravity: supports,
+    anchor and weight balance, and the anchor reaction equals the cable's pull on the body
+    (minus the supports' share, computed independently from the internal forces)."""
+    mesh = sf.Mesh.box(size=(0.2, 0.05, 0.05), cells=(8, 2, 2))
+    body = sf.Body(mesh, silicone)
+    body.fix(mesh.nodes_in_box(min=(-1e-9, -1, -1), max=(1e-9, 1, 1)))
+    # From an anchor 5 cm beyond the tip, obliquely down into the beam and along it to its root.
+    points = [[0.25, 0.025, -0.02], [0.19, 0.025, 0.01], [0.1, 0.025, 0.01], [0.01, 0.025, 0.01]]
+    body.add_cable(sf.Cable(points, 2e3, 0.9, anchor_first=True))
+    body.add_cable(sf.Cable([[0.02, 0.01, 0.04], [0.18, 0.01, 0.04]], 2e3, 0.95))  # internal: no anchor
+    result = sf.solve_static(body, gravity=GRAVITY)
+    anchor, internal = result.anchor_reactions
+    assert internal is None and np.linalg.norm(anchor) > 1.0  # a real pull, N
+    weight = np.array(GRAVITY) * 1080 * mesh.volumes.sum()
+    np.testing.assert_allclose(result.reactions.sum(axis=0) + anchor + weight, 0.0, atol=1e-8 * np.linalg.norm(anchor))
+    # The anchor pulls the cable towards itself, i.e. from the first interior point to the anchor.
+    towards_anchor = result.cable_points[0][0] - result.cable_points[0][1]
+    assert anchor @ towards_anchor > 0.99 * np.linalg.norm(anchor) * np.linalg.norm(towards_anchor)
+    summary = result.to_dict()["cables"]
+    assert summary[0]["anchor_reaction"] == pytest.approx(anchor.tolist()) and summary[1]["anchor_reaction"] is None

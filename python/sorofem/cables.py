@@ -121,8 +121,9 @@ class Cable:
         Mass of each free node, kg, >= 0. A massless free node needs a taut cable on both
         sides to be determined.
     damping
-        Reserved for a cable dashpot; only ``None`` is supported (use Rayleigh damping in
-        :func:`sorofem.simulate`).
+        Dashpot coefficient of each segment, N s/m, >= 0: in :func:`sorofem.simulate` a force
+        ``damping * dL/dt`` along each segment opposes the change of its length ``L`` (the
+        cable's internal friction); static solves are unaffected.
 
     Raises
     ------
@@ -150,7 +151,7 @@ class Cable:
         snap_tolerance: float = 0.0,
         outside: str = "error",
         free_node_mass: float = 0.0,
-        damping: None = None,
+        damping: float = 0.0,
     ) -> None:
         try:
             pts = np.asarray(points, dtype=np.float64)
@@ -174,12 +175,6 @@ class Cable:
             raise ParameterError(f"anchor_first: expected True or False, got {_describe(anchor_first)}", "anchor_first")
         if not isinstance(outside, str) or outside not in OUTSIDE_MODES:
             raise ParameterError(f"outside: expected one of {list(OUTSIDE_MODES)}, got {outside!r}", "outside")
-        if damping is not None:
-            raise ParameterError(
-                "damping: per-cable damping is not supported yet; pass damping=None and use Rayleigh "
-                "damping, sf.simulate(..., damping=(alpha_M, beta_K))",
-                "damping",
-            )
         pts.setflags(write=False)
         lengths.setflags(write=False)
         self._points = pts
@@ -191,7 +186,7 @@ class Cable:
         self.snap_tolerance = _real(snap_tolerance, "snap_tolerance", minimum=0.0, strict=False)
         self.outside = outside
         self.free_node_mass = _real(free_node_mass, "free_node_mass", minimum=0.0, strict=False)
-        self.damping = None
+        self.damping = _real(damping, "damping", minimum=0.0, strict=False)
 
     @classmethod
     def line(
@@ -278,6 +273,7 @@ class Cable:
             "snap_tolerance": self.snap_tolerance,
             "outside": self.outside,
             "free_node_mass": self.free_node_mass,
+            "damping": self.damping,
         }
 
     def to_dict(self) -> dict[str, Any]:

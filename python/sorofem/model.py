@@ -1118,6 +1118,22 @@ class StaticResult:
         return float((rest * log_j).sum() / rest.sum())
 
     @property
+    def anchor_reactions(self) -> list[NDArray[np.float64] | None]:
+        """Per cable, the force ``(3,)`` in N that its world anchor (``anchor_first=True``: the
+        motor) exerts on the cable, ``-T_0 (y_1 - y_0) / |y_1 - y_0|`` with ``T_0`` the first
+        segment's tension; ``None`` for a cable without an anchor. With the support
+        ``reactions`` and the applied loads it closes the body's force balance."""
+        out: list[NDArray[np.float64] | None] = []
+        for cable, points, tensions in zip(self.body.cables, self.cable_points, self.cable_tensions):
+            if not cable.anchor_first:
+                out.append(None)
+                continue
+            direction = points[1] - points[0]
+            length = float(np.linalg.norm(direction))
+            out.append(-tensions[0] * direction / length if length > 0 else np.zeros(3))
+        return out
+
+    @property
     def max_displacement(self) -> float:
         """Largest nodal displacement magnitude, m."""
         return float(np.linalg.norm(self.displacement, axis=1).max(initial=0.0))
@@ -1153,6 +1169,7 @@ class StaticResult:
         from .cables import placement_counts
 
         placements = self.body.cable_placements()
+        anchors = self.anchor_reactions + [None] * len(self.body.cables)
         return {
             "cables": [
                 {
@@ -1161,6 +1178,7 @@ class StaticResult:
                     "rest_length": cable.length,
                     "tensions": self.cable_tensions[c].tolist() if c < len(self.cable_tensions) else None,
                     "max_tension": float(self.cable_tensions[c].max()) if c < len(self.cable_tensions) else None,
+                    "anchor_reaction": None if anchors[c] is None else anchors[c].tolist(),
                     "placements": [p.kind for p in placements[c]],
                     "placement_counts": placement_counts(placements[c]),
                 }

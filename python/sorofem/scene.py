@@ -55,6 +55,7 @@ Schema
     snap_tolerance = 0.0       # m: points this far outside the mesh attach to the nearest tet
     outside = "error"          # or "free": points farther out become free nodes
     free_node_mass = 0.0       # kg per free node
+    damping = 0.0              # N s/m per segment: force damping * dL/dt (dynamics only)
 
     [dynamics]                 # optional: integrate in time instead of a static solve
     dt = 0.01                  # s
@@ -773,7 +774,8 @@ _SOLVER = _Table(
 _CABLE_DEFAULTS = {
     name: p.default for name, p in inspect.signature(Cable.__init__).parameters.items() if p.default is not p.empty
 }
-_CABLE_OPTIONS = ("stiffness", "actuation", "transition", "anchor_first", "snap_tolerance", "outside", "free_node_mass")
+_CABLE_OPTIONS = ("stiffness", "actuation", "transition", "anchor_first", "snap_tolerance", "outside", "free_node_mass",
+                  "damping")
 
 _CABLE = _Table(
     {
@@ -796,6 +798,8 @@ _CABLE = _Table(
                           "own mass", default=_CABLE_DEFAULTS["outside"]),
         "free_node_mass": _Field(_Number(ge=0), "mass of each free node", "kg",
                                  default=_CABLE_DEFAULTS["free_node_mass"]),
+        "damping": _Field(_Number(ge=0), "dashpot of each segment: a force damping * dL/dt in time integration",
+                          "N s/m", default=_CABLE_DEFAULTS["damping"]),
     },
     choices=(_Choice((_Group(("points",)), _Group(("start", "direction", "length", "divisions")))),),
     doc="A cable of unilateral springs embedded in the mesh: points, or start + direction + length + divisions.",

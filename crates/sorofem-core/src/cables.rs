@@ -33,6 +33,9 @@ pub struct CableSpec {
     pub outside: Outside,
     /// Mass of each free node (kg).
     pub free_node_mass: f64,
+    /// Dashpot coefficient of each segment (N s/m): a damping force `c dL/dt` along the segment
+    /// in time integration; no effect on static solves.
+    pub damping: f64,
 }
 
 impl CableSpec {
@@ -46,6 +49,7 @@ impl CableSpec {
             snap_tolerance: 0.0,
             outside: Outside::Error,
             free_node_mass: 0.0,
+            damping: 0.0,
         }
     }
 }
@@ -114,11 +118,16 @@ pub fn embed(mesh: &TetMesh, specs: &[CableSpec]) -> Result<EmbeddedCables> {
                 spec.free_node_mass,
                 spec.free_node_mass >= 0.0 && spec.free_node_mass.is_finite(),
             ),
+            (
+                "damping",
+                spec.damping,
+                spec.damping >= 0.0 && spec.damping.is_finite(),
+            ),
         ] {
             if !ok {
                 let expected = match field {
                     "transition" => "a fraction in (0, 1)",
-                    "snap_tolerance" | "free_node_mass" => "a finite value >= 0",
+                    "snap_tolerance" | "free_node_mass" | "damping" => "a finite value >= 0",
                     _ => "a finite value > 0",
                 };
                 return Err(Error::invalid(&name(field), expected, value));
@@ -198,6 +207,7 @@ pub fn embed(mesh: &TetMesh, specs: &[CableSpec]) -> Result<EmbeddedCables> {
             stiffness: spec.stiffness,
             actuation: spec.actuation,
             transition: spec.transition,
+            damping: spec.damping,
         });
         out.placements.push(placements);
     }

@@ -700,7 +700,10 @@ impl Model {
                     prescribed: prescribed.clone(),
                     step: Some(step),
                 };
-                match newton::solve(&mut problem, &mut trial, &step_options) {
+                problem.model.cables.begin_step(h, &z);
+                let outcome = newton::solve(&mut problem, &mut trial, &step_options);
+                problem.model.cables.end_step();
+                match outcome {
                     Ok(report) => {
                         iterations += report.iterations;
                         for (f, &d) in free.iter().enumerate() {

@@ -12,6 +12,10 @@ use std::sync::Arc;
 
 /// A two-segment cable: an anchor, a point embedded with weights over two blocks, a free node.
 fn test_cable(actuation: f64) -> CableTerm {
+    test_cable_with_damping(actuation, 0.0)
+}
+
+fn test_cable_with_damping(actuation: f64, damping: f64) -> CableTerm {
     let points = vec![
         PointMap {
             offset: [0.0, 0.0, 0.0],
@@ -36,6 +40,7 @@ fn test_cable(actuation: f64) -> CableTerm {
         stiffness: 2e3,
         actuation,
         transition: 0.05,
+        damping,
     }])
 }
 
@@ -87,6 +92,65 @@ fn cable_derivatives_in_slack_transition_and_taut_states() {
             );
         }
     }
+}
+
+#[test]
+fn dashpot_derivatives_when_segments_lengthen_and_shorten() {
+    let mut term = test_cable_with_damping(0.95, 30.0);
+    let mut rng = Rng::new(5);
+    let start = rng.vec(15, 1e-2);
+    term.begin_step(1e-3, &start);
+    let mut dofs = vec![0; 24];
+    for (label, change) in [("lengthening", 0.03), ("shortening", -0.03)] {
+        for e in 0..term.n_elements() {
+            term.element_dofs(e, &mut dofs);
+            let mut z: Vec<f64> = dofs.iter().map(|&d| start[d]).collect();
+            // The segment's far end moves along x, near the segment direction.
+            for slot in 4..8 {
+                z[3 * slot] += change;
+            }
+            let mut grad = vec![0.0; 24];
+            let mut hess = vec![0.0; 24 * 24];
+            term.element(e, &z, Some(&mut grad), Some(&mut hess), HessianMode::Exact);
+            check_gradient(
+                &format!("dashpot {label} segment {e} gradient"),
+                &z,
+                1e-7,
+                |x: &[f64]| term.element(e, x, None, None, HessianMode::Exact),
+                &grad,
+                1e-6,
+                1e-9,
+            );
+            check_jacobian(
+                &format!("dashpot {label} segment {e} Hessian"),
+                &z,
+                1e-7,
+                |x: &[f64]| {
+                    let mut g = vec![0.0; 24];
+                    term.element(e, x, Some(&mut g), None, HessianMode::Exact);
+                    g
+                },
+                &hess,
+                1e-5,
+                1e-6,
+            );
+        }
+    }
+    // At the start of the step the dashpot adds no force.
+    let z0 = vec![0.0; 15];
+    let mut with = vec![0.0; 24];
+    let mut without = vec![0.0; 24];
+    term.begin_step(1e-3, &z0);
+    term.element(0, &vec![0.0; 24], Some(&mut with), None, HessianMode::Exact);
+    term.end_step();
+    term.element(
+        0,
+        &vec![0.0; 24],
+        Some(&mut without),
+        None,
+        HessianMode::Exact,
+    );
+    assert_eq!(with, without);
 }
 
 #[test]

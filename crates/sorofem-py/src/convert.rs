@@ -155,7 +155,7 @@ pub fn faces_to_numpy<'py>(py: Python<'py>, faces: &[[usize; 3]]) -> Bound<'py, 
 
 /// A cable description: a dict with "points" ((k, 3) float64, m), "stiffness" (N/m),
 /// "actuation", and optionally "transition", "anchor_first", "snap_tolerance" (m),
-/// "outside" ("error" | "free") and "free_node_mass" (kg).
+/// "outside" ("error" | "free"), "free_node_mass" (kg) and "damping" (N s/m).
 pub fn cable_spec(
     index: usize,
     item: &Bound<'_, PyAny>,
@@ -181,6 +181,7 @@ pub fn cable_spec(
     spec.transition = float("transition", Some(spec.transition))?;
     spec.snap_tolerance = float("snap_tolerance", Some(0.0))?;
     spec.free_node_mass = float("free_node_mass", Some(0.0))?;
+    spec.damping = float("damping", Some(0.0))?;
     if let Some(v) = get("anchor_first") {
         spec.anchor_first = v
             .extract::<bool>()

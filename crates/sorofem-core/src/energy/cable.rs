@@ -16,6 +16,13 @@
 //! DOFs, or no DOFs for a world anchor. Gradient and Hessian are mapped through those weights
 //! (`f = W^T f_y`, `K = W^T K_y W`); `K_y` is positive semi-definite because `psi'' >= 0` and
 //! `psi' >= 0`.
+//!
+//! In time integration a segment with dashpot coefficient `c` (N s/m) also resists the rate of
+//! change of its length. Implicit Euler over a step `h` from lengths `L_n` is the minimiser of the
+//! incremental potential plus `c / (2 h) (L - L_n)^2` (J), whose gradient is the damping force
+//! `c (L - L_n) / h dL/dy`, exactly `c dL/dt` at the end of the step. Its Hessian
+//! `c / h [n n^T + (L - L_n) / L (I - n n^T)]` loses definiteness when the segment shortens; the
+//! projected Hessian clamps `L - L_n` at zero.
 
 use super::{HessianMode, Term};
 use nalgebra::{Matrix3, Vector3};
@@ -39,6 +46,8 @@ pub struct Cable {
     pub stiffness: f64,
     pub actuation: f64,
     pub transition: f64,
+    /// Dashpot coefficient per segment (N s/m); acts only within a time step.
+    pub damping: f64,
 }
 
 /// `(psi, psi', psi'')` of the unilateral spring at stretch `s` with transition width `w`.
@@ -85,6 +94,9 @@ pub struct CableTerm {
     pub cables: Vec<Cable>,
     /// (cable, segment) of each element.
     segments: Vec<(usize, usize)>,
+    /// The time step (s) and each segment's length at its start (m) while a dynamic step is
+    /// being solved; `None` in static solves.
+    dashpot: Option<(f64, Vec<f64>)>,
 }
 
 impl CableTerm {
@@ -94,7 +106,29 @@ impl CableTerm {
             .enumerate()
             .flat_map(|(c, cable)| (0..cable.n_segments()).map(move |k| (c, k)))
             .collect();
-        CableTerm { cables, segments }
+        CableTerm {
+            cables,
+            segments,
+            dashpot: None,
+        }
+    }
+
+    /// Starts an implicit Euler step of length `h` (s) from the full DOF vector `z`: the dashpots
+    /// resist length changes from here on. [`CableTerm::end_step`] switches them off.
+    pub fn begin_step(&mut self, h: f64, z: &[f64]) {
+        let lengths = self
+            .segments
+            .iter()
+            .map(|&(c, k)| {
+                let cable = &self.cables[c];
+                (cable.position(k + 1, z) - cable.position(k, z)).norm()
+            })
+            .collect();
+        self.dashpot = Some((h, lengths));
+    }
+
+    pub fn end_step(&mut self) {
+        self.dashpot = None;
     }
 
     /// Blocks and weights of both endpoints, padded: `(blocks, weights)` of length 8.
@@ -167,7 +201,7 @@ impl Term for CableTerm {
         z: &[f64],
         grad: Option<&mut [f64]>,
         hess: Option<&mut [f64]>,
-        _: HessianMode,
+        mode: HessianMode,
     ) -> f64 {
         let (c, k) = self.segments[e];
         let cable = &self.cables[c];
@@ -178,8 +212,29 @@ impl Term for CableTerm {
         let (psi, dpsi, d2psi) =
             unilateral(length - cable.actuation * rest, cable.transition * rest);
         let stiffness = cable.stiffness;
+        // Dashpot: energy c/(2h) dL^2, force and curvature along the segment (see module docs).
+        let (mut energy, mut force, mut axial, mut transverse) = (
+            stiffness * psi,
+            stiffness * dpsi,
+            stiffness * d2psi,
+            stiffness * dpsi,
+        );
+        if let Some((h, start_lengths)) = &self.dashpot {
+            if cable.damping > 0.0 {
+                let rate = cable.damping / h;
+                let change = length - start_lengths[e];
+                energy += 0.5 * rate * change * change;
+                force += rate * change;
+                axial += rate;
+                transverse += rate
+                    * match mode {
+                        HessianMode::Exact => change,
+                        HessianMode::Projected => change.max(0.0),
+                    };
+            }
+        }
         if grad.is_none() && hess.is_none() {
-            return stiffness * psi;
+            return energy;
         }
         // A zero-length taut segment has no direction; it cannot occur with alpha > 0 (s < 0).
         let n = if length > 0.0 {
@@ -190,7 +245,7 @@ impl Term for CableTerm {
         // Derivative of y1 - y0 with respect to slot s: coefficient (w1_s - w0_s) times identity.
         let coefficient: [f64; 8] = std::array::from_fn(|slot| weights[8 + slot] - weights[slot]);
         if let Some(grad) = grad {
-            let f = stiffness * dpsi * n;
+            let f = force * n;
             for slot in 0..8 {
                 for i in 0..3 {
                     grad[3 * slot + i] = coefficient[slot] * f[i];
@@ -198,10 +253,13 @@ impl Term for CableTerm {
             }
         }
         if let Some(hess) = hess {
-            let geometric = if length > 0.0 { dpsi / length } else { 0.0 };
+            let geometric = if length > 0.0 {
+                transverse / length
+            } else {
+                0.0
+            };
             let nn = n * n.transpose();
-            let block: Matrix3<f64> =
-                stiffness * (d2psi * nn + geometric * (Matrix3::identity() - nn));
+            let block: Matrix3<f64> = axial * nn + geometric * (Matrix3::identity() - nn);
             for a in 0..8 {
                 for b in 0..8 {
                     let scale = coefficient[a] * coefficient[b];
@@ -213,7 +271,7 @@ impl Term for CableTerm {
                 }
             }
         }
-        stiffness * psi
+        energy
     }
 }
 
@@ -235,6 +293,10 @@ impl CableTerm {
         let (c, k) = self.segments[e];
         let cable = &self.cables[c];
         let stiffness = cable.stiffness;
+        debug_assert!(
+            self.dashpot.is_none(),
+            "parameter derivatives are for static states"
+        );
         // The gradient is linear in k, so d(grad)/dk = grad / k.
         self.element(e, z, Some(d_stiffness), None, HessianMode::Exact);
         d_stiffness.iter_mut().for_each(|v| *v /= stiffness);
