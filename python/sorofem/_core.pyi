@@ -126,6 +126,7 @@ class Model:
     def forward(self, direction: dict[str, Any]) -> dict[str, Any]:
         """Forward sensitivity along a parameter direction (any of the adjoint's keys):
         {"dx": (n, 3) m per unit, "dp": (n,) Pa per unit or None}."""
+    def cable_rest_lengths(self) -> list[list[float]]: ...
     def cable_placements(self) -> list[list[tuple[str, int, float]]]:
         """Per cable and point: ("embedded", tet, distance m) | ("free", index, 0.0) | ("anchor", -1, 0.0)."""
     def simulate(

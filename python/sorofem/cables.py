@@ -48,7 +48,7 @@ from .errors import ConvergenceError, InputError, ParameterError, ShapeError
 if TYPE_CHECKING:
     from .model import Body, StaticResult
 
-__all__ = ["Cable", "CablePlacement", "OUTSIDE_MODES", "actuate", "segment_tensions", "cable_state", "write_cables"]
+__all__ = ["Cable", "CablePlacement", "OUTSIDE_MODES", "actuate", "segment_tensions", "write_cables"]
 
 #: What to do with a cable point farther than ``snap_tolerance`` from the mesh.
 OUTSIDE_MODES: tuple[str, ...] = ("error", "free")
@@ -460,7 +460,7 @@ def segment_tensions(
     the spring law of the module docstring evaluated in NumPy (an independent check of the
     solver's ``result.cable_tensions``). ``alpha`` defaults to ``cable.actuation``;
     ``rest_lengths`` to ``cable.rest_lengths`` (a snapped point's segments are measured from
-    the material point it was attached to, see :func:`cable_state`).
+    the material point it was attached to, see :func:`attached_rest_lengths`).
 
     Examples
     --------
@@ -479,46 +479,11 @@ def segment_tensions(
     )
 
 
-def _attachment_weights(mesh: Any, tet: int, point: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Barycentric weights of ``point`` in ``tet``, clamped to >= 0 and renormalised like the
-    core's locator does for snapped points (exact for points inside)."""
-    rest = mesh.points[mesh.tets[tet]]
-    w = np.linalg.solve((rest[1:] - rest[0]).T, point - rest[0])
-    w = np.maximum(np.concatenate([[1 - w.sum()], w]), 0.0)
-    return w / w.sum()
-
-
 def attached_rest_lengths(body: "Body", cable: "Cable | int") -> NDArray[np.float64]:
     """Rest length of each segment as the solver sees it, ``(k - 1,)`` m: measured between the
-    material points the cable points are attached to (a snapped point moves onto the mesh)."""
+    material points the cable points are attached to (a snapped point sits on the mesh)."""
     index = cable_index(body, cable)
-    c = body.cables[index]
-    y0 = c.points.copy()
-    for k, place in enumerate(body.cable_placements()[index]):
-        if place.tet >= 0:
-            y0[k] = _attachment_weights(body.mesh, place.tet, c.points[k]) @ body.mesh.points[body.mesh.tets[place.tet]]
-    return np.linalg.norm(np.diff(y0, axis=0), axis=1)
-
-
-def cable_state(body: "Body", positions: ArrayLike) -> tuple[list[NDArray[np.float64]], list[NDArray[np.float64]]]:
-    """Cable points and tensions of ``body`` at node ``positions`` ``(n_nodes, 3)``, computed
-    here from the barycentric embedding (clamped like the core's locator for snapped points).
-    Free nodes are not part of ``positions``: their points (and the tensions of the segments
-    touching them) are NaN. Used when the extension does not return the cable state itself.
-    """
-    mesh = body.mesh
-    x = np.asarray(positions, dtype=np.float64)
-    all_points, all_tensions = [], []
-    for cable, alpha, placements in zip(body.cables, body.actuations, body.cable_placements()):
-        y = np.full((cable.n_points, 3), np.nan)
-        for k, place in enumerate(placements):
-            if place.kind == "anchor":
-                y[k] = cable.points[k]
-            elif place.tet >= 0:
-                y[k] = _attachment_weights(mesh, place.tet, cable.points[k]) @ x[mesh.tets[place.tet]]
-        all_points.append(y)
-        all_tensions.append(segment_tensions(cable, y, alpha, attached_rest_lengths(body, cable)))
-    return all_points, all_tensions
+    return np.asarray(body._core_model().cable_rest_lengths()[index], dtype=np.float64)
 
 
 # ---------------------------------------------------------------------------

@@ -1263,10 +1263,6 @@ def solve_static(
         raise
     report = SolveReport.from_dict(out)
     cable_points, cable_tensions = out.get("cable_points"), out.get("cable_tensions")
-    if body.cables and cable_points is None:  # an extension that does not return them yet
-        from .cables import cable_state
-
-        cable_points, cable_tensions = cable_state(body, out["positions"])
     return StaticResult(
         body, out["positions"], out.get("pressure"), report, reactions=out.get("reactions"),
         cable_points=cable_points, cable_tensions=cable_tensions,

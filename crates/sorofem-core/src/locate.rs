@@ -79,15 +79,31 @@ impl<'a> PointLocator<'a> {
         [1.0 + g[0].dot(&d), g[1].dot(&d), g[2].dot(&d), g[3].dot(&d)]
     }
 
-    fn point_of(&self, e: usize, weights: &[f64; 4]) -> Vector3<f64> {
+    /// Barycentric weights (all >= 0) of the point of tet `e` closest to `p`, which lies
+    /// outside it, and the distance (m) to that point: the closest point over its four faces.
+    fn closest_point(&self, e: usize, p: &Vector3<f64>) -> ([f64; 4], f64) {
         let tet = self.mesh.tets()[e];
-        (0..4)
-            .map(|a| weights[a] * Vector3::from(self.mesh.rest()[tet[a]]))
-            .sum()
+        let x: [Vector3<f64>; 4] = std::array::from_fn(|a| Vector3::from(self.mesh.rest()[tet[a]]));
+        let mut best = (f64::INFINITY, [0.0; 4]);
+        for skip in 0..4 {
+            let face: Vec<usize> = (0..4).filter(|&a| a != skip).collect();
+            let (u, v, w) = closest_on_triangle(p, &x[face[0]], &x[face[1]], &x[face[2]]);
+            let q = u * x[face[0]] + v * x[face[1]] + w * x[face[2]];
+            let distance = (q - p).norm();
+            if distance < best.0 {
+                let mut weights = [0.0; 4];
+                weights[face[0]] = u;
+                weights[face[1]] = v;
+                weights[face[2]] = w;
+                best = (distance, weights);
+            }
+        }
+        (best.1, best.0)
     }
 
     /// The tet containing `p`, or else the closest one found within `search_radius` (m), with
-    /// the point projected onto it by clamping its barycentric coordinates (`distance` > 0).
+    /// the point projected onto its closest point (`distance` > 0, the exact point-to-tet
+    /// distance).
     /// `None` when no tet lies within the search radius.
     pub fn locate(&self, p: [f64; 3], search_radius: f64) -> Option<Location> {
         let p = Vector3::from(p);
@@ -123,16 +139,13 @@ impl<'a> PointLocator<'a> {
                                     distance: 0.0,
                                 });
                             }
-                            let mut clamped = w.map(|v| v.max(0.0));
-                            let sum: f64 = clamped.iter().sum();
-                            clamped.iter_mut().for_each(|v| *v /= sum);
-                            let distance = (self.point_of(e, &clamped) - p).norm();
+                            let (weights, distance) = self.closest_point(e, &p);
                             if distance <= search_radius
                                 && best.as_ref().is_none_or(|b| distance < b.distance)
                             {
                                 best = Some(Location {
                                     tet: e,
-                                    weights: clamped,
+                                    weights,
                                     distance,
                                 });
                             }
@@ -149,5 +162,118 @@ impl<'a> PointLocator<'a> {
             }
         }
         best
+    }
+}
+
+/// Barycentric coordinates `(u, v, w)` (>= 0, sum 1) of the point of triangle `abc` closest to
+/// `p`: the Voronoi-region walk over vertices, edges and face (Ericson, Real-Time Collision
+/// Detection, 5.1.5).
+fn closest_on_triangle(
+    p: &Vector3<f64>,
+    a: &Vector3<f64>,
+    b: &Vector3<f64>,
+    c: &Vector3<f64>,
+) -> (f64, f64, f64) {
+    let (ab, ac, ap) = (b - a, c - a, p - a);
+    let (d1, d2) = (ab.dot(&ap), ac.dot(&ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return (1.0, 0.0, 0.0);
+    }
+    let bp = p - b;
+    let (d3, d4) = (ab.dot(&bp), ac.dot(&bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return (0.0, 1.0, 0.0);
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let t = d1 / (d1 - d3);
+        return (1.0 - t, t, 0.0);
+    }
+    let cp = p - c;
+    let (d5, d6) = (ab.dot(&cp), ac.dot(&cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return (0.0, 0.0, 1.0);
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let t = d2 / (d2 - d6);
+        return (1.0 - t, 0.0, t);
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        let t = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return (0.0, 1.0 - t, t);
+    }
+    let denominator = 1.0 / (va + vb + vc);
+    let (v, w) = (vb * denominator, vc * denominator);
+    (1.0 - v - w, v, w)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Orientation;
+
+    fn unit_tet() -> TetMesh {
+        let points = vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+        ];
+        TetMesh::try_new(points, &[[0, 1, 2, 3]], Orientation::Reorient)
+            .unwrap()
+            .0
+    }
+
+    #[test]
+    fn snapping_projects_onto_the_closest_point_of_the_tet() {
+        let mesh = unit_tet();
+        let locator = PointLocator::new(&mesh);
+        // Below the face y = 0, over its interior: clamping the barycentric coordinates would
+        // give (0.25, 0, 0.25) at distance 1.06; the closest point is (0.5, 0, 0.5) at 1.
+        let hit = locator.locate([0.5, -1.0, 0.5], 2.0).unwrap();
+        assert!((hit.distance - 1.0).abs() < 1e-12, "{hit:?}");
+        let q = locator.barycentric(0, &Vector3::new(0.5, 0.0, 0.5));
+        for a in 0..4 {
+            assert!((hit.weights[a] - q[a]).abs() < 1e-12, "{hit:?}");
+        }
+        // Beyond a vertex and beyond an edge.
+        let vertex = locator.locate([2.0, -1.0, -1.0], 3.0).unwrap();
+        assert!(
+            (vertex.distance - 3f64.sqrt()).abs() < 1e-12
+                && (vertex.weights[1] - 1.0).abs() < 1e-12
+        );
+        let edge = locator.locate([0.5, -1.0, -1.0], 3.0).unwrap();
+        assert!((edge.distance - 2f64.sqrt()).abs() < 1e-12, "{edge:?}");
+        // Out of reach.
+        assert!(locator.locate([0.5, -1.0, 0.5], 0.9).is_none());
+    }
+
+    #[test]
+    fn triangle_regions() {
+        let (a, b, c) = (
+            Vector3::new(0.0, 0.0, 0.0),
+            Vector3::new(1.0, 0.0, 0.0),
+            Vector3::new(0.0, 1.0, 0.0),
+        );
+        let cases = [
+            ([0.2, 0.2, 5.0], [0.2, 0.2, 0.0]),
+            ([-1.0, -1.0, 0.0], [0.0, 0.0, 0.0]),
+            ([2.0, -0.5, 1.0], [1.0, 0.0, 0.0]),
+            ([0.5, -3.0, 0.0], [0.5, 0.0, 0.0]),
+            ([1.0, 1.0, 0.0], [0.5, 0.5, 0.0]),
+            ([-2.0, 0.5, 0.0], [0.0, 0.5, 0.0]),
+            ([-0.5, 2.0, 0.0], [0.0, 1.0, 0.0]),
+        ];
+        for (p, expected) in cases {
+            let (u, v, w) = closest_on_triangle(&Vector3::from(p), &a, &b, &c);
+            let q = u * a + v * b + w * c;
+            assert!(
+                (q - Vector3::from(expected)).norm() < 1e-12,
+                "{p:?} -> {q:?}"
+            );
+            assert!(u >= 0.0 && v >= 0.0 && w >= 0.0 && (u + v + w - 1.0).abs() < 1e-12);
+        }
     }
 }

@@ -198,6 +198,16 @@ impl Model {
         self.assembler.n_free()
     }
 
+    /// Rest length of each segment of each cable (m), between the points the cable is attached
+    /// to (a snapped point sits on the mesh, not where the user put it).
+    pub fn cable_rest_lengths(&self) -> Vec<Vec<f64>> {
+        self.cables
+            .cables
+            .iter()
+            .map(|c| c.rest_lengths.clone())
+            .collect()
+    }
+
     /// Where each cable point was placed (embedded, snapped, free node or anchor).
     pub fn cable_placements(&self) -> &[Vec<PointPlacement>] {
         &self.placements

@@ -532,6 +532,11 @@ impl Model {
         self.inner.set_cable_stiffness(cable, stiffness).py(py)
     }
 
+    /// Rest length (m) of each segment, per cable, between the attached points.
+    fn cable_rest_lengths(&self) -> Vec<Vec<f64>> {
+        self.inner.cable_rest_lengths()
+    }
+
     /// Where each cable point was placed: per cable, a list of
     /// ("embedded", tet, distance) | ("free", index, 0.0) | ("anchor", -1, 0.0).
     fn cable_placements(&self) -> Vec<Vec<(String, i64, f64)>> {
