@@ -75,6 +75,7 @@ fn main() {
             density: vec![env("PROFILE_RHO", 1070.0); m],
         })
         .unwrap();
+    let mut deformed = vec![0.0; 3 * mesh.n_nodes()];
     for _ in 0..3 {
         let t = Instant::now();
         let s = model
@@ -88,6 +89,12 @@ fn main() {
             )
             .unwrap();
         let r = &s.report;
+        for (d, (x, x0)) in deformed
+            .iter_mut()
+            .zip(s.positions.iter().zip(mesh.rest().iter().flatten()))
+        {
+            *d = x - x0;
+        }
         println!(
             "solve {:.4} s, {} iterations; assembly {:.4} factorization {:.4} solve {:.4} line search {:.4}",
             t.elapsed().as_secs_f64(), r.iterations, r.timings.assembly, r.timings.factorization, r.timings.solve, r.timings.line_search
@@ -150,6 +157,19 @@ fn main() {
         t.elapsed().as_secs_f64() * 1e3 / reps as f64
     );
     let t = Instant::now();
+    for _ in 0..reps {
+        std::hint::black_box(assembler.evaluate(
+            &[&term],
+            &deformed,
+            true,
+            Some(HessianMode::Exact),
+        ));
+    }
+    println!(
+        "hessian at the solution {:.3} ms",
+        t.elapsed().as_secs_f64() * 1e3 / reps as f64
+    );
+    let t = Instant::now();
     let mut factor = SparseFactor::analyse(assembler.pattern()).unwrap();
     println!(
         "analyse     {:.3} ms, factor nnz {}",
@@ -163,6 +183,20 @@ fn main() {
     println!(
         "llt         {:.3} ms",
         t.elapsed().as_secs_f64() * 1e3 / reps as f64
+    );
+    let (mut t_h, mut t_f) = (0.0, 0.0);
+    for _ in 0..reps {
+        let t = Instant::now();
+        let e = assembler.evaluate(&[&term], &deformed, true, Some(HessianMode::Exact));
+        t_h += t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        assert!(factor.factor_llt(assembler.pattern(), &e.hessian).unwrap());
+        t_f += t.elapsed().as_secs_f64();
+    }
+    println!(
+        "alternating: hessian {:.3} ms, llt {:.3} ms",
+        t_h * 1e3 / reps as f64,
+        t_f * 1e3 / reps as f64
     );
     let mut rhs = vec![1.0; assembler.n_free()];
     let t = Instant::now();
