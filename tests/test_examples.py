@@ -47,6 +47,8 @@ def test_example_checks_pass(path, tmp_path):
     missing = [str(f) for f in getattr(module, "REQUIRED_FILES", ()) if not Path(f).is_file()]
     if missing:
         pytest.skip(f"{path.name} needs data that is not here: {', '.join(missing)}")
+    for name in getattr(module, "REQUIRED_MODULES", ()):  # optional extras, e.g. the mesher
+        pytest.importorskip(name, reason=f"{path.name} needs the optional module {name}")
     # Heavy examples take ``quick`` (fewer cases, same checks); their full runs are benchmarks.
     quick = "quick" in inspect.signature(module.run).parameters
     result = module.run(tmp_path, quick=True) if quick else module.run(tmp_path)

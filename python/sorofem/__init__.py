@@ -30,6 +30,7 @@ from .model import Body, Mesh, NeoHookean, SolveReport, StaticResult, solve_stat
 from .scene import Scene
 from .targets import Target
 from .inverse import control, estimate, gradient
+from .meshing import tetrahedralize  # the mesher itself (optional extra) is imported on first use
 
 try:
     __version__ = _version("sorofem")
@@ -53,6 +54,7 @@ __all__ = [
     "gradient",
     "estimate",
     "control",
+    "tetrahedralize",
     "SorofemError",
     "InputError",
     "ShapeError",
@@ -66,6 +68,7 @@ __all__ = [
     "errors",
     "inverse",
     "io",
+    "meshing",
     "plot",
     "targets",
 ]
