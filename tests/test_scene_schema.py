@@ -103,6 +103,15 @@ starts = 0
 cables = [0]
 bounds = [[0.5, 1.0]]
 method = "l-bfgs-b"
+
+[output]
+directory = "results/full"
+summary = true
+vtu = true
+png = true
+cables = true
+pvd = true
+color_by = "von_mises"
 """
 
 #: Scenes whose mistakes the schema itself catches (structure, types, ranges, allowed values).
@@ -139,6 +148,10 @@ STRUCTURALLY_BAD = [
     ("shear_modulus = 30e3", "shear_modulus = 30e3\npoisson_ratio = 0.3"),
     ('name = "tip"', 'name = "my tip"'),
     ("[[fixed]]", "[fixed]"),
+    ('color_by = "von_mises"', 'color_by = "stress"'),
+    ("png = true", "png = 1"),
+    ('directory = "results/full"', "directory = 3"),
+    ("[output]\nformat = 'vtk'", "unknown key"),
 ]
 
 
@@ -203,6 +216,7 @@ def test_scene_sources_are_found():
 def test_full_scene_is_valid():
     scene = sf.Scene.from_toml(FULL_SCENE, ROOT / "full.toml")
     assert set(scene.regions) == {"tip"} and scene.dynamics is not None and scene.control is not None
+    assert scene.output["directory"] == ROOT / "results" / "full" and scene.output["color_by"] == "von_mises"
 
 
 # ---------------------------------------------------------------------------
@@ -269,7 +283,7 @@ def test_schema_lists_exactly_the_keys_the_validator_accepts(tmp_path):
     paths = _object_paths(scene_module.json_schema())
     assert {"", "mesh", "mesh.box", "material", "material.region[0]", "material.region[0].box", "fixed[0]",
             "fixed[0].box", "loads.forces[0]", "loads.forces[0].box", "cable[0]", "dynamics", "target",
-            "estimate", "control"} <= set(paths)
+            "estimate", "control", "output"} <= set(paths)
     full = tomllib.loads(FULL_SCENE)
     sf.Scene.from_toml(_dump(full), tmp_path / "s.toml")  # the inline rewrite is valid as it is
     for path, properties in paths.items():

@@ -281,6 +281,83 @@ def test_cli_plays_a_run_folder_and_a_dynamic_scene(tmp_path, trajectory, monkey
 
 
 # ---------------------------------------------------------------------------
+# The scene view's "simulate [dynamics]" button: the motion played in the same page
+
+PULL = "\n[dynamics]\ndt = 0.02\nsteps = 6\nsave_every = 2\nmass_damping = 5.0\n"
+
+
+def _dynamic_scene(tmp_path: Path, extra: str = PULL) -> Path:
+    path = tmp_path / "pull.toml"
+    path.write_text((SCENES / "cable_cantilever.toml").read_text(encoding="utf-8") + extra, encoding="utf-8")
+    return path
+
+
+@needs_dynamics
+def test_simulate_button_plays_the_dynamics_in_the_page(server, tmp_path) -> None:
+    path = _dynamic_scene(tmp_path)
+    view = build_view(sf.Scene.load(path), server)
+    assert view.simulate_button.label == "simulate [dynamics]" and not view.simulate_button.disabled
+    assert "6 steps of 0.02 s" in view.simulate_button.hint
+    view.sliders[0].value = 0.75  # the motion holds the actuation set in the page
+    view.simulate_button.value = True  # a click: simulates, then plays
+    motion = view.motion
+    try:
+        assert motion is not None and view.simulations == 1 and motion.playing
+        motion.pause()
+        assert _wait(lambda: motion._thread is None)
+        # The static view is hidden, the playback shows the simulated frames.
+        assert not view.surface.visible and not view.sliders[0].visible and not view.simulate_button.visible
+        reference = sf.Scene.load(path)
+        reference.body.set_actuation(0, 0.75)
+        expected = reference.simulate(progress=False)
+        assert motion.frames.n_frames == expected.n_frames == 4
+        np.testing.assert_allclose(motion.frames.positions, expected.positions, rtol=0, atol=1e-10)
+        for k in (3, 1):
+            motion.slider.value = k  # as a browser drag would
+            np.testing.assert_array_equal(motion.surface.vertices,
+                                          motion.frames.positions[k][motion.surface_nodes].astype(np.float32))
+            np.testing.assert_allclose(motion.cables[0].points, _segments(expected.cable_points[k][0]), atol=1e-6)
+        assert "alpha 0.750" in motion.status.content
+        # Back to static: the playback and its controls are gone, the static view is back as it was.
+        view.back_button.value = True
+        assert view.motion is None and view.back_button is None and motion._closed
+        assert all(h._impl.removed for h in (motion.surface, motion.slider, motion.play_button, motion.header))
+        assert view.surface.visible and not view.wireframe.visible and view.sliders[0].visible
+        assert view.sliders[0].value == pytest.approx(0.75) and "alpha 0.750" in view.status.content
+        # A second run after a formulation switch simulates the mixed body.
+        view.formulation.value = "mixed"
+        second = view.simulate(play=False)
+        assert second is view.motion and view.simulations == 2 and not second.playing
+        assert second.frames.trajectory.body.formulation == "mixed"
+        view.show_static()
+    finally:
+        if view.motion is not None:
+            view.motion.close()
+
+
+def test_simulate_button_without_dynamics(server) -> None:
+    view = build_view(sf.Scene.load(SCENES / "cable_cantilever.toml"), server)
+    assert view.simulate_button.disabled and "no [dynamics] table" in view.simulate_button.hint
+    with pytest.raises(sf.InputError, match=r"\[dynamics\]"):
+        view.simulate()
+    assert view.motion is None
+
+
+def test_failed_simulation_keeps_the_static_view(server, tmp_path, monkeypatch) -> None:
+    view = build_view(sf.Scene.load(_dynamic_scene(tmp_path)), server)
+
+    def fail(**_):
+        raise sf.ConvergenceError("step 3 did not converge")
+
+    monkeypatch.setattr(view.scene, "simulate", fail)
+    view.simulate_button.value = True
+    assert view.motion is None and view.simulations == 0
+    assert "simulation failed" in view.status.content and "step 3" in view.status.content
+    assert view.surface.visible and not view.simulate_button.disabled and not view.sliders[0].disabled
+    assert view.simulate_button.label == "simulate [dynamics]"
+
+
+# ---------------------------------------------------------------------------
 # A real browser: headless Chromium (Debian package) driven by Playwright's Python package.
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -343,4 +420,42 @@ def test_browser_plays_a_trajectory(server, trajectory) -> None:
                 browser.close()
     finally:
         view.close()
+    assert not errors, errors
+
+
+@pytest.mark.skipif(os.environ.get("SOROFEM_BROWSER_TEST") != "1",
+                    reason="real-browser test (~7 s): run by `make test-viewer` (SOROFEM_BROWSER_TEST=1)")
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium executable (apt-get install chromium)")
+@needs_dynamics
+def test_browser_simulates_and_plays_a_scene(server, tmp_path) -> None:
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright Python package not installed")
+    view = build_view(sf.Scene.load(_dynamic_scene(tmp_path)), server)
+    url = f"http://127.0.0.1:{server.get_port()}"
+    errors: list[str] = []
+    try:
+        with sync_api.sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, headless=True,
+                                        args=["--no-sandbox", "--use-gl=swiftshader", "--enable-unsafe-swiftshader"])
+            try:
+                page = browser.new_page()
+                page.on("pageerror", lambda exc: errors.append(str(exc)))
+                page.goto(url)
+                page.wait_for_selector("canvas", timeout=30_000)
+                page.get_by_role("button", name="simulate [dynamics]").first.wait_for(timeout=30_000)
+                assert _wait(lambda: bool(server.get_clients()), 10.0), "the browser did not connect"
+                page.get_by_role("button", name="simulate [dynamics]").first.click()
+                assert _wait(lambda: view.motion is not None, 20.0), "clicking simulate in the browser did nothing"
+                motion = view.motion
+                page.get_by_text("speed (x real time)").first.wait_for(timeout=30_000)  # the playback controls
+                page.get_by_text("cable 0 alpha").first.wait_for(state="hidden", timeout=10_000)  # static ones hidden
+                assert _wait(lambda: motion.frames_shown > 1, 10.0)  # it plays
+                page.get_by_role("button", name="back to static").first.click()
+                assert _wait(lambda: view.motion is None, 10.0), "clicking back to static did nothing"
+                page.get_by_text("cable 0 alpha").first.wait_for(state="visible", timeout=10_000)
+                page.wait_for_timeout(300)
+            finally:
+                browser.close()
+    finally:
+        if view.motion is not None:
+            view.motion.close()
     assert not errors, errors

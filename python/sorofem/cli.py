@@ -2,9 +2,9 @@
 
 Usage::
 
-    sorofem run SCENE.toml --out DIR [--quiet] [--json]
-    sorofem estimate SCENE.toml --out DIR [--quiet] [--json]
-    sorofem control SCENE.toml --out DIR [--quiet] [--json]
+    sorofem run SCENE.toml [--out DIR] [--quiet] [--json]
+    sorofem estimate SCENE.toml [--out DIR] [--quiet] [--json]
+    sorofem control SCENE.toml [--out DIR] [--quiet] [--json]
     sorofem info MESH [--scale S] [--json]
     sorofem convert IN OUT [--scale S] [--quiet]
     sorofem view SCENE.toml | RUN_DIR | FILE.pvd [--trajectory] [--port P] [--host H]
@@ -24,6 +24,12 @@ was placed. A scene with ``[dynamics]`` is integrated in time instead: ``run`` w
 and kinetic energy against time) and ``DIR/summary.json`` (steps, Newton iterations, cutbacks,
 energies, final cable tensions).
 
+The output folder ``DIR`` is ``--out DIR`` or, without it, the scene's ``[output] directory``
+(relative to the scene file); ``--out`` wins when both are given. ``[output]`` also switches
+each file off (``summary``, ``vtu``, ``png``, ``cables``, ``pvd``; all on by default) and picks
+the field that colours ``shape.png`` (``color_by``). Whatever is switched on, ``run`` refuses to
+write over a file the scene reads (the scene, its mesh, its ``[target]`` surfaces).
+
 ``estimate`` fits the scene's ``[estimate]`` parameters so that its equilibrium meets
 ``[target]`` (:func:`sorofem.estimate`); ``control`` finds the actuations of the ``[control]``
 cables that bring ``[target]`` closest (:func:`sorofem.control`). Both use the scene's gravity
@@ -31,7 +37,7 @@ and ``[solver]`` options (the Newton tolerance no looser than 1e-10) and write `
 as (mu, lambda) and (E, nu), the residual, forward solves and history; control: actuation,
 distance, reachable, forward solves, history) and ``DIR/result.vtu`` (the final equilibrium).
 An estimate that does not converge, or a control target that is not reachable, exits 3
-(the outputs are still written).
+(the outputs are still written). They follow ``[output]`` ``directory``, ``summary`` and ``vtu``.
 
 ``schema`` prints the JSON Schema of scene files (:func:`sorofem.scene.json_schema`), or
 writes it to ``--out FILE``; it never overwrites an existing file unless ``--force`` is given.
@@ -39,7 +45,7 @@ Editors use it to complete and check scene files (a ``#:schema ./scene.schema.js
 line, for VS Code's Even Better TOML or taplo).
 
 Exit codes: 0 success; 2 bad input (scene, mesh or arguments: one ``error: ...`` line on
-stderr); 3 the solver failed (``summary.json`` is still written, with
+stderr); 3 the solver failed (``summary.json`` is still written, unless switched off, with
 ``"converged": false`` and the solver report); 1 an unexpected error (a bug: please report
 it with the traceback).
 
@@ -101,7 +107,8 @@ def _build_parser() -> argparse.ArgumentParser:
 
     run = sub.add_parser("run", help="solve a scene file and write results")
     run.add_argument("scene", type=Path, help="TOML scene file")
-    run.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder (created)")
+    run.add_argument("--out", type=Path, metavar="DIR",
+                     help="output folder (created); overrides the scene's [output] directory")
     run.add_argument("--quiet", action="store_true", help="print nothing on success")
     run.add_argument("--json", action="store_true", help="print summary.json to stdout instead of text")
 
@@ -109,7 +116,8 @@ def _build_parser() -> argparse.ArgumentParser:
                        ("control", "find the [control] cable actuations that reach the scene's [target]")):
         inv = sub.add_parser(name, help=text)
         inv.add_argument("scene", type=Path, help="TOML scene file with [target] and [" + name + "]")
-        inv.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder (created)")
+        inv.add_argument("--out", type=Path, metavar="DIR",
+                         help="output folder (created); overrides the scene's [output] directory")
         inv.add_argument("--quiet", action="store_true", help="print nothing on success")
         inv.add_argument("--json", action="store_true", help="print summary.json to stdout instead of text")
 
@@ -206,14 +214,69 @@ def _jsonable(value: Any) -> Any:
     return value
 
 
-def _write_json(path: Path, data: dict[str, Any]) -> str:
-    text = json.dumps(_jsonable(data), indent=2) + "\n"
-    path.write_text(text, encoding="utf-8")
+# ---------------------------------------------------------------------------
+# run
+
+
+def _output_folder(args: argparse.Namespace, scene: Any) -> tuple[Path, str]:
+    """The folder to write to and how to name it in messages: ``--out`` wins over the scene's
+    ``[output] directory`` (resolved against the scene file's folder)."""
+    if args.out is not None:
+        out, label = Path(args.out), "--out"
+    elif scene.output["directory"] is not None:
+        out, label = Path(scene.output["directory"]), f"{scene.path}: [output] directory"
+    else:
+        raise InputError(
+            f"no output folder: pass --out DIR, or set [output] directory = \"...\" in {scene.path} "
+            "(relative to the scene file)"
+        )
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{label}: {out} exists and is not a folder")
+    return out, label
+
+
+def _selected_outputs(scene: Any) -> list[str]:
+    """The names ``run`` writes for ``scene``: what it produces, less what ``[output]`` turns off."""
+    switches = scene.output
+    if scene.dynamics is not None:
+        wanted = {"trajectory.pvd": "pvd", "trajectory": "pvd", "summary.json": "summary", "trajectory.png": "png"}
+        names = DYNAMICS_OUTPUT_NAMES
+    else:
+        wanted = {"result.vtu": "vtu", "summary.json": "summary", "shape.png": "png", "convergence.png": "png",
+                  "cables.vtu": "cables"}
+        names = OUTPUT_NAMES + (CABLE_OUTPUT_NAMES if scene.cables else ())
+    return [name for name in names if switches[wanted[name]]]
+
+
+def _refuse_inputs(outputs: dict[str, Path], scene: Any, label: str) -> None:
+    """Never write over a file the scene reads (the scene, its mesh, its target surfaces), nor
+    put a trajectory frame where one of them is."""
+    for source in scene.input_files:
+        source = Path(source).resolve()
+        for name, target in outputs.items():
+            clash = target.resolve() == source
+            if name == "trajectory":  # the folder of the frames trajectory/frame_NNNNN.vtu
+                clash = clash or (source.parent == target.resolve() and source.name.startswith("frame_"))
+            if clash:
+                raise InputError(f"{label}: writing {name} would overwrite the input file {source}")
+
+
+def _write_summary(outputs: dict[str, Path], summary: dict[str, Any]) -> str:
+    """The summary as JSON text, written to summary.json unless ``[output] summary = false``."""
+    text = json.dumps(_jsonable(summary), indent=2) + "\n"
+    if "summary.json" in outputs:
+        outputs["summary.json"].write_text(text, encoding="utf-8")
     return text
 
 
-# ---------------------------------------------------------------------------
-# run
+def _report_in(outputs: dict[str, Path]) -> str:
+    return f" (report in {outputs['summary.json']})" if "summary.json" in outputs else ""
+
+
+def _wrote(outputs: dict[str, Path], out: Path, extra: str = "") -> str:
+    if not outputs:
+        return "wrote nothing: [output] switches every file off"
+    return f"wrote {', '.join(outputs)}{extra} to {out}"
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -224,20 +287,11 @@ def _run(args: argparse.Namespace) -> int:
     from .scene import Scene
 
     scene = Scene.load(args.scene)
-    out: Path = args.out
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out: {out} exists and is not a folder")
-    if scene.dynamics is not None:
-        names = DYNAMICS_OUTPUT_NAMES
-    else:
-        names = OUTPUT_NAMES + (CABLE_OUTPUT_NAMES if scene.cables else ())
-    outputs = {name: out / name for name in names}
-    protected = [p for p in (scene.path, scene.mesh.source) if p is not None]
-    for target in outputs.values():
-        for source in protected:
-            if target.resolve() == Path(source).resolve():
-                raise InputError(f"--out: writing {target.name} would overwrite the input file {source}")
-    out.mkdir(parents=True, exist_ok=True)
+    out, label = _output_folder(args, scene)
+    outputs = {name: out / name for name in _selected_outputs(scene)}
+    _refuse_inputs(outputs, scene, label)
+    if outputs:
+        out.mkdir(parents=True, exist_ok=True)
 
     base = {
         "scene": str(scene.path),
@@ -250,7 +304,7 @@ def _run(args: argparse.Namespace) -> int:
         "solver_options": dict(scene.solver),
     }
     if scene.dynamics is not None:
-        return _run_dynamics(args, scene, outputs, base)
+        return _run_dynamics(args, scene, outputs, base, out)
     try:
         result = scene.solve()
     except SolverError as exc:
@@ -267,24 +321,30 @@ def _run(args: argparse.Namespace) -> int:
             "error": str(exc),
             "report": report.to_dict(),
         }
-        text = _write_json(outputs["summary.json"], summary)
-        if report.residual_history:
+        text = _write_summary(outputs, summary)
+        if report.residual_history and "convergence.png" in outputs:
             plot_convergence(report, outputs["convergence.png"], tolerance=scene.solver["tolerance"])
         if args.json:
             sys.stdout.write(text)
         what = "did not converge" if isinstance(exc, ConvergenceError) else "failed"
-        print(f"error: solver {what}: {_one_line(exc)} (report in {outputs['summary.json']})", file=sys.stderr)
+        print(f"error: solver {what}: {_one_line(exc)}{_report_in(outputs)}", file=sys.stderr)
         return EXIT_SOLVER
 
     summary = {**base, **result.to_dict()}
-    write_result(outputs["result.vtu"], result)
-    if scene.cables:
+    if "result.vtu" in outputs:
+        write_result(outputs["result.vtu"], result)
+    if "cables.vtu" in outputs:
         from .cables import write_cables
 
         write_cables(outputs["cables.vtu"], result)
-    text = _write_json(outputs["summary.json"], summary)
-    plot_rest_and_deformed(result, outputs["shape.png"], title=f"{scene.path.name}: max |u| = {result.max_displacement:.3g} m")
-    plot_convergence(result.report, outputs["convergence.png"], tolerance=scene.solver["tolerance"])
+    text = _write_summary(outputs, summary)
+    if "shape.png" in outputs:
+        color_by = scene.output["color_by"]
+        field = "" if color_by == "displacement" else f", coloured by {color_by}"
+        plot_rest_and_deformed(result, outputs["shape.png"], color_by=color_by,
+                               title=f"{scene.path.name}: max |u| = {result.max_displacement:.3g} m{field}")
+    if "convergence.png" in outputs:
+        plot_convergence(result.report, outputs["convergence.png"], tolerance=scene.solver["tolerance"])
 
     if args.json:
         sys.stdout.write(text)
@@ -300,11 +360,13 @@ def _run(args: argparse.Namespace) -> int:
             print(f"pressure {result.pressure.min():.4g} .. {result.pressure.max():.4g} Pa")
         for c, tension in enumerate(result.cable_tensions):
             print(f"cable {c}: alpha {result.actuations[c]:g}, tension {tension.min():.4g} .. {tension.max():.4g} N")
-        print(f"wrote {', '.join(outputs)} to {out}")
+        print(_wrote(outputs, out))
     return EXIT_OK
 
 
-def _run_dynamics(args: argparse.Namespace, scene: Any, outputs: dict[str, Path], base: dict[str, Any]) -> int:
+def _run_dynamics(
+    args: argparse.Namespace, scene: Any, outputs: dict[str, Path], base: dict[str, Any], out: Path
+) -> int:
     """``run`` for a scene with ``[dynamics]``: trajectory.pvd + frames, summary.json, trajectory.png."""
     from .cables import placement_counts
     from .plot import plot_trajectory
@@ -320,18 +382,20 @@ def _run_dynamics(args: argparse.Namespace, scene: Any, outputs: dict[str, Path]
         trajectory = scene.simulate()
     except SolverError as exc:
         summary = {**base, "converged": False, "error": str(exc)}
-        text = _write_json(outputs["summary.json"], summary)
+        text = _write_summary(outputs, summary)
         if args.json:
             sys.stdout.write(text)
-        print(f"error: solver failed: {_one_line(exc)} (report in {outputs['summary.json']})", file=sys.stderr)
+        print(f"error: solver failed: {_one_line(exc)}{_report_in(outputs)}", file=sys.stderr)
         return EXIT_SOLVER
-    trajectory.write_pvd(outputs["trajectory.pvd"].parent, "trajectory")
+    if "trajectory.pvd" in outputs:
+        trajectory.write_pvd(outputs["trajectory.pvd"].parent, "trajectory")
     summary = {**base, "converged": True, **trajectory.to_dict()}
     for entry, tension, points in zip(summary.get("cables", []), trajectory.cable_tensions(-1), trajectory.cable_points[-1]):
         entry["final_tensions"] = tension.tolist()
         entry["final_points"] = points.tolist()
-    text = _write_json(outputs["summary.json"], summary)
-    plot_trajectory(trajectory, outputs["trajectory.png"])
+    text = _write_summary(outputs, summary)
+    if "trajectory.png" in outputs:
+        plot_trajectory(trajectory, outputs["trajectory.png"])
     if args.json:
         sys.stdout.write(text)
     elif not args.quiet:
@@ -342,7 +406,8 @@ def _run_dynamics(args: argparse.Namespace, scene: Any, outputs: dict[str, Path]
               f"{summary['timings']['simulate']:.3g} s")
         print(f"final kinetic energy {summary['final_kinetic_energy']:.3e} J (max {summary['max_kinetic_energy']:.3e} J), "
               f"max displacement {summary['max_displacement']:.6g} m")
-        print(f"wrote {', '.join(outputs)} ({trajectory.n_frames} frames) to {outputs['summary.json'].parent}")
+        frames = f" ({trajectory.n_frames} frames)" if "trajectory.pvd" in outputs else ""
+        print(_wrote(outputs, out, frames))
     return EXIT_OK
 
 
@@ -365,14 +430,10 @@ def _inverse(args: argparse.Namespace) -> int:
         raise InputError(f"{scene.path}: '{command}' needs a [target] table")
     if section is None:
         raise InputError(f"{scene.path}: '{command}' needs an [{command}] table")
-    out: Path = args.out
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out: {out} exists and is not a folder")
-    outputs = {name: out / name for name in ("summary.json", "result.vtu")}
-    for target in outputs.values():
-        for source in (p for p in (scene.path, scene.mesh.source) if p is not None):
-            if target.resolve() == Path(source).resolve():
-                raise InputError(f"--out: writing {target.name} would overwrite the input file {source}")
+    out, label = _output_folder(args, scene)
+    switches = {"summary.json": scene.output["summary"], "result.vtu": scene.output["vtu"]}
+    outputs = {name: out / name for name, on in switches.items() if on}
+    _refuse_inputs(outputs, scene, label)
     solve = scene.solver
     # Sensitivities are only as accurate as the equilibria: never looser than the inverse default.
     tolerance = min(solve["tolerance"], DEFAULT_TOLERANCE)
@@ -425,17 +486,18 @@ def _inverse(args: argparse.Namespace) -> int:
             f"{'reachable' if ctl.reachable else 'NOT reachable'}, {ctl.forward_solves} forward solves",
         ]
         failure = f"target not reachable: {ctl.message}"
-    out.mkdir(parents=True, exist_ok=True)
-    if result is not None:
+    if outputs:
+        out.mkdir(parents=True, exist_ok=True)
+    if result is not None and "result.vtu" in outputs:
         write_result(outputs["result.vtu"], result)
-    text = _write_json(outputs["summary.json"], summary)
+    text = _write_summary(outputs, summary)
     if args.json:
         sys.stdout.write(text)
     elif not args.quiet:
         print("\n".join(lines))
-        print(f"wrote {', '.join(outputs)} to {out}")
+        print(_wrote(outputs, out))
     if not ok:
-        print(f"error: {_one_line(Exception(failure))} (report in {outputs['summary.json']})", file=sys.stderr)
+        print(f"error: {_one_line(Exception(failure))}{_report_in(outputs)}", file=sys.stderr)
         return EXIT_SOLVER
     return EXIT_OK
 
@@ -517,6 +579,9 @@ def _info(args: argparse.Namespace) -> int:
         "bad_tets": int(np.count_nonzero(quality < BAD_QUALITY)),
         "bad_quality_threshold": BAD_QUALITY,
         "reoriented_tets": int(mesh.reoriented.size),
+        "cell_tags": None if mesh.cell_tags is None else {
+            int(t): int(n) for t, n in zip(*np.unique(mesh.cell_tags, return_counts=True))
+        },
     }
     if args.json:
         sys.stdout.write(json.dumps(_jsonable(data), indent=2) + "\n")
@@ -531,6 +596,9 @@ def _info(args: argparse.Namespace) -> int:
     print(f"  tet volume       min {data['min_tet_volume']:.4g}, max {data['max_tet_volume']:.4g} m^3")
     print(f"  quality          radius ratio min {data['min_quality']:.3f}, mean {data['mean_quality']:.3f} (1 = regular)")
     print(f"  bad tets         {data['bad_tets']} with radius ratio < {BAD_QUALITY}")
+    if data["cell_tags"] is not None:
+        tags = ", ".join(f"{t}: {n}" for t, n in data["cell_tags"].items())
+        print(f"  cell tags        {tags} (tag: tets; Gmsh physical group / TetGen region)")
     return EXIT_OK
 
 

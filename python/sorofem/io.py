@@ -12,8 +12,24 @@ Formats
     Blank lines and ``#`` comments (whole-line or trailing) are allowed.
 anything else
     Through meshio (``.vtu``, ``.msh``, ``.mesh``, ``.xdmf``, ...). Only linear
-    tetrahedra (``tetra`` cells) are used; nodes used by no tetrahedron (e.g. by surface
-    triangles only) are dropped, because a node without stiffness makes the problem singular.
+    tetrahedra (``tetra`` cells) are used: lower-dimensional cells beside them (surface
+    triangles, lines, points of physical groups) are skipped, and nodes used by no
+    tetrahedron are dropped, because a node without stiffness makes the problem singular.
+    Other volume cells (second-order ``tetra10``, hexahedra, wedges, pyramids) are an
+    error rather than silently left out of the body.
+Gmsh ``.msh``
+    Versions 2.2 and 4.0/4.1, ASCII or binary (what Gmsh and fTetWild write); node tags may
+    start at 1 and have gaps.
+TetGen ``.node`` + ``.ele``
+    Name either file; the other one (same stem) must be next to it. Indices may be 0- or
+    1-based (the first node's number sets the base); boundary markers and attributes are
+    allowed.
+
+**Cell tags.** When the file gives each tetrahedron an integer tag (a Gmsh physical group,
+``gmsh:physical``; a TetGen region attribute, the first element attribute of the ``.ele``
+file, ``tetgen -A``; a Medit reference), it is kept as :attr:`sorofem.Mesh.cell_tags`,
+``(n_tets,)`` int64 in the order of ``mesh.tets``; otherwise ``cell_tags`` is None. Gmsh
+files without physical groups have no tags (the elementary entity numbers are not used).
 
 Writers never overwrite the file a mesh was read from.
 
@@ -41,9 +57,16 @@ from .errors import InputError, MeshError, ParameterError
 if TYPE_CHECKING:
     from .model import Mesh, StaticResult
 
-__all__ = ["read_mesh", "write_mesh", "write_result"]
+__all__ = ["read_mesh", "write_mesh", "write_result", "CELL_TAG_KEYS"]
 
 PathLike = str | os.PathLike[str]
+
+#: meshio cell-data names of per-tetrahedron integer tags, in the order they are looked for:
+#: the first one present becomes :attr:`sorofem.Mesh.cell_tags`.
+CELL_TAG_KEYS = ("gmsh:physical", "tetgen:ref", "medit:ref")
+#: Volume cells meshio may report besides ``tetra`` (used when meshio does not say).
+_VOLUME_CELLS = ("tetra10", "hexahedron", "hexahedron20", "hexahedron24", "hexahedron27", "wedge", "wedge12",
+                 "wedge15", "wedge18", "pyramid", "pyramid13", "pyramid14")
 
 
 def _same_file(a: Path, b: Path | None) -> bool:
@@ -70,22 +93,28 @@ def read_mesh(path: PathLike, scale: float = 1.0) -> "Mesh":
     Parameters
     ----------
     path
-        A ``.tet`` file or any volume mesh meshio reads.
+        A ``.tet`` file, a Gmsh ``.msh`` (2.2 or 4.x, ASCII or binary; what fTetWild writes
+        too), a TetGen ``.node`` or ``.ele`` file (the pair is read; 0- or 1-based), or any
+        other volume mesh meshio reads (``.vtu``, ``.mesh``, ...).
     scale
         Factor applied to the coordinates (e.g. ``1e-3`` for a mesh in millimetres).
 
     Returns
     -------
     Mesh
-        With ``mesh.source`` set to ``path``.
+        With ``mesh.source`` set to ``path``. Only the linear tetrahedra are kept: triangles,
+        lines and points that many files carry beside them (Gmsh physical surfaces, say) are
+        skipped, and nodes no tetrahedron uses are dropped (the remaining nodes keep their
+        order). ``mesh.cell_tags`` holds the file's per-tetrahedron integer tag (Gmsh physical
+        group, TetGen region attribute, Medit reference), or None; see the module docstring.
 
     Raises
     ------
     FileNotFoundError
-        No such file.
+        No such file (for TetGen: either file of the pair).
     MeshError
-        A malformed ``.tet`` line (the message gives file and line), no tetrahedra,
-        or an invalid mesh.
+        A malformed ``.tet`` line (the message gives file and line), no tetrahedra, volume
+        cells other than linear tetrahedra (``tetra10``, hexahedra, ...), or an invalid mesh.
 
     Examples
     --------
@@ -98,15 +127,23 @@ def read_mesh(path: PathLike, scale: float = 1.0) -> "Mesh":
         raise ParameterError(f"scale: expected a finite positive number, got {scale!r}", "scale")
     if not path.is_file():
         raise FileNotFoundError(f"mesh file not found: {path}")
+    tags = None
     if path.suffix.lower() == ".tet":
         points, tets = _read_tet(path)
     else:
-        points, tets = _read_meshio(path)
+        if path.suffix in (".node", ".ele"):  # meshio reads the TetGen pair from either name
+            other = path.with_suffix(".ele" if path.suffix == ".node" else ".node")
+            if not other.is_file():
+                raise FileNotFoundError(f"mesh file not found: {other} (the TetGen companion of {path})")
+        points, tets, tags = _read_meshio(path)
     try:
         mesh = Mesh(points * float(scale), tets)
     except MeshError as exc:
         raise MeshError(f"{path}: {exc}") from None
     mesh.source = path
+    if tags is not None:
+        tags.setflags(write=False)
+        mesh.cell_tags = tags
     return mesh
 
 
@@ -138,7 +175,17 @@ def _read_tet(path: Path) -> tuple[np.ndarray, np.ndarray]:
     return np.array(points, dtype=np.float64).reshape(-1, 3), np.array(tets, dtype=np.int64)
 
 
-def _read_meshio(path: Path) -> tuple[np.ndarray, np.ndarray]:
+def _volume_types(types: set[str]) -> list[str]:
+    """The cell types among ``types`` that are 3-D but not linear tetrahedra."""
+    try:
+        from meshio._mesh import topological_dimension as dims
+    except ImportError:  # a meshio without the table: the common ones
+        dims = {t: 3 for t in _VOLUME_CELLS}
+    return sorted(t for t in types if t != "tetra" and dims.get(t) == 3)
+
+
+def _read_meshio(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Points, tets and per-tet tags (or None) of a file meshio reads."""
     import contextlib
     import io as _io
 
@@ -155,7 +202,17 @@ def _read_meshio(path: Path) -> tuple[np.ndarray, np.ndarray]:
         raise MeshError(
             f"{path}: could not read the mesh with meshio: {exc}" + (f" ({detail})" if detail else "")
         ) from None
-    blocks = [np.asarray(c.data, dtype=np.int64) for c in m.cells if c.type == "tetra"]
+    volume = _volume_types({c.type for c in m.cells})
+    if volume:
+        counts = ", ".join(f"{sum(len(c.data) for c in m.cells if c.type == t)} {t}" for t in volume)
+        hint = (" (second-order tetrahedra: mesh with element order 1, e.g. `gmsh -3 -order 1`)"
+                if "tetra10" in volume else " (mesh the volume with tetrahedra only)")
+        raise MeshError(
+            f"{path}: the mesh has volume cells that are not linear tetrahedra ({counts}); sorofem uses linear "
+            f"tetrahedra ('tetra') only and will not leave part of the body out{hint}"
+        )
+    tetra = [i for i, c in enumerate(m.cells) if c.type == "tetra"]
+    blocks = [np.asarray(m.cells[i].data, dtype=np.int64) for i in tetra]
     if not blocks:
         found = sorted({c.type for c in m.cells}) or ["none"]
         raise MeshError(
@@ -172,7 +229,23 @@ def _read_meshio(path: Path) -> tuple[np.ndarray, np.ndarray]:
         remap = np.full(len(points), -1, dtype=np.int64)
         remap[used] = np.arange(used.size)
         points, tets = points[used], remap[tets]
-    return points, tets
+    return points, tets, _cell_tags(m, tetra, len(tets))
+
+
+def _cell_tags(m: object, tetra: list[int], n_tets: int) -> np.ndarray | None:
+    """The first of CELL_TAG_KEYS that gives every tetrahedron an integer, as int64."""
+    cell_data = getattr(m, "cell_data", {})
+    for key in CELL_TAG_KEYS:
+        data = cell_data.get(key)
+        if data is None or len(data) <= max(tetra):
+            continue
+        try:
+            values = np.concatenate([np.asarray(data[i], dtype=np.float64).reshape(-1) for i in tetra])
+        except (TypeError, ValueError):
+            continue
+        if values.size == n_tets and np.all(np.isfinite(values)) and np.all(values == np.round(values)):
+            return values.astype(np.int64)
+    return None
 
 
 def write_mesh(path: PathLike, mesh: "Mesh") -> None:

@@ -224,6 +224,10 @@ class Mesh:
         #: The file this mesh was read from (set by :func:`sorofem.io.read_mesh`), so
         #: writers can refuse to overwrite it.
         self.source: Path | None = None
+        #: The file's integer tag of each tetrahedron (a Gmsh physical group, a TetGen region
+        #: attribute, a Medit reference), ``(n_tets,)`` int64 in the order of :attr:`tets`, or
+        #: None (set by :func:`sorofem.io.read_mesh`; kept by :meth:`scaled` and :meth:`transformed`).
+        self.cell_tags: NDArray[np.int64] | None = None
 
     # -- constructors -------------------------------------------------------------
 
@@ -257,8 +261,13 @@ class Mesh:
 
     @classmethod
     def read(cls, path: str | os.PathLike[str], scale: float = 1.0) -> "Mesh":
-        """Read a mesh file: the ``.tet`` text format or anything meshio reads.
+        """Read a mesh file: the ``.tet`` text format, Gmsh ``.msh`` (2.2, 4.x; also fTetWild's),
+        a TetGen ``.node``/``.ele`` pair (0- or 1-based) or anything else meshio reads.
 
+        Only the linear tetrahedra are kept: triangles, lines and points beside them (Gmsh
+        physical surfaces, for instance) are skipped and nodes no tetrahedron uses are dropped;
+        other volume cells (``tetra10``, hexahedra) are an error. A per-tetrahedron integer tag
+        in the file (Gmsh physical group, TetGen region attribute) becomes :attr:`cell_tags`.
         See :func:`sorofem.io.read_mesh`.
 
         Examples
@@ -281,6 +290,7 @@ class Mesh:
         mesh = Mesh(self._points * factor, self._tets, orientation="reject")
         mesh._reoriented = self._reoriented
         mesh.source = self.source
+        mesh.cell_tags = self.cell_tags
         return mesh
 
     # -- data -----------------------------------------------------------------------
@@ -461,6 +471,7 @@ class Mesh:
         mesh = Mesh(self._points[:, order] * signs + 0.0, tets, orientation="reject")
         mesh._reoriented = self._reoriented
         mesh.source = self.source
+        mesh.cell_tags = self.cell_tags
         return mesh
 
 

@@ -26,7 +26,12 @@ if TYPE_CHECKING:
     from .dynamics import Trajectory
     from .model import SolveReport, StaticResult
 
-__all__ = ["plot_rest_and_deformed", "plot_convergence", "plot_trajectory"]
+__all__ = ["plot_rest_and_deformed", "plot_convergence", "plot_trajectory", "COLOR_FIELDS"]
+
+#: Fields :func:`plot_rest_and_deformed` can colour the deformed surface by: nodal displacement
+#: magnitude and pressure (mixed formulation only) are averaged over each boundary triangle; the
+#: element fields von Mises stress and J are those of the tetrahedron the triangle belongs to.
+COLOR_FIELDS = ("displacement", "von_mises", "pressure", "J")
 
 
 def _new_figure(figsize: tuple[float, float]):  # -> Figure
@@ -56,15 +61,49 @@ def _shaded(rgba: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return out
 
 
+def _face_owners(tets: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """The tetrahedron each boundary triangle belongs to, ``(k,)``."""
+    local = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])
+    every = np.sort(tets[:, local].reshape(-1, 3), axis=1)
+    _, ids = np.unique(np.vstack([every, np.sort(faces, axis=1)]), axis=0, return_inverse=True)
+    ids = ids.reshape(-1)
+    tet_of = np.empty(int(ids.max()) + 1, dtype=np.int64)
+    tet_of[ids[: len(every)]] = np.arange(len(every)) // 4  # a boundary face occurs in one tet only
+    return tet_of[ids[len(every):]]
+
+
+def _surface_field(result: "StaticResult", faces: np.ndarray, color_by: str) -> tuple[np.ndarray, np.ndarray, str]:
+    """Per boundary triangle the value of ``color_by``, all values (for the colour bar), and its label."""
+    from .errors import InputError
+
+    if color_by not in COLOR_FIELDS:
+        raise InputError(f"color_by: expected one of {', '.join(map(repr, COLOR_FIELDS))}, got {color_by!r}")
+    if color_by == "displacement":
+        nodal = np.linalg.norm(result.displacement, axis=1)
+        return nodal[faces].mean(axis=1), nodal, "displacement magnitude |u| [m]"
+    if color_by == "pressure":
+        if result.pressure is None:
+            raise InputError(
+                "color_by='pressure': the result has no pressure field (only the mixed formulation has one); "
+                "colour by 'displacement', 'von_mises' or 'J'"
+            )
+        nodal = np.asarray(result.pressure)
+        return nodal[faces].mean(axis=1), nodal, "pressure p [Pa]"
+    values = np.asarray(result.von_mises if color_by == "von_mises" else result.J)
+    label = "von Mises stress [Pa]" if color_by == "von_mises" else "volume ratio J = det F"
+    return values[_face_owners(result.mesh.tets, faces)], values, label
+
+
 def plot_rest_and_deformed(
     result: "StaticResult",
     path: str | os.PathLike[str],
     title: str | None = None,
+    color_by: str = "displacement",
 ) -> None:
-    """Rest shape (grey wireframe) and deformed surface coloured by ``|u|``, as a PNG; the
+    """Rest shape (grey wireframe) and deformed surface coloured by a field, as a PNG; the
     body's cables, if any, in red (rest shape dashed).
 
-    Axes share one scale so shapes are not distorted; the colour bar is in metres.
+    Axes share one scale so shapes are not distorted.
 
     Parameters
     ----------
@@ -74,6 +113,16 @@ def plot_rest_and_deformed(
         Output PNG file.
     title
         Figure title; default: the maximum displacement.
+    color_by
+        One of :data:`COLOR_FIELDS`: ``"displacement"`` (``|u|``, m, viridis from 0),
+        ``"von_mises"`` (Pa, viridis from 0), ``"pressure"`` (Pa, mixed formulation only; blue
+        negative, red positive, symmetric about 0) or ``"J"`` (volume ratio; blue compressed,
+        red dilated, symmetric about 1).
+
+    Raises
+    ------
+    InputError
+        An unknown ``color_by``, or ``"pressure"`` for a result without pressure.
     """
     from matplotlib import cm, colormaps, colors
     from matplotlib.ticker import MaxNLocator
@@ -83,8 +132,8 @@ def plot_rest_and_deformed(
     faces = mesh.boundary_faces()
     rest = mesh.points
     deformed = result.positions
-    magnitude = np.linalg.norm(result.displacement, axis=1)
-    face_value = magnitude[faces].mean(axis=1)
+    face_value, values, bar_label = _surface_field(result, faces, color_by)
+    vmax_u = float(np.linalg.norm(result.displacement, axis=1).max(initial=0.0))
 
     fig = _new_figure((8.0, 6.0))
     ax = fig.add_subplot(projection="3d")
@@ -92,9 +141,15 @@ def plot_rest_and_deformed(
     edges = _boundary_edges(faces)
     ax.add_collection3d(Line3DCollection(rest[edges], colors=(0.5, 0.5, 0.5, 0.35), linewidths=0.4))
 
-    vmax = float(magnitude.max()) if magnitude.size and magnitude.max() > 0 else 1.0
-    norm = colors.Normalize(vmin=0.0, vmax=vmax)
-    cmap = colormaps["viridis"]
+    if color_by in ("pressure", "J"):  # diverging, symmetric about the unloaded value
+        centre = 0.0 if color_by == "pressure" else 1.0
+        half = float(np.abs(values - centre).max(initial=0.0)) or (1.0 if color_by == "pressure" else 1e-6)
+        norm = colors.Normalize(vmin=centre - half, vmax=centre + half)
+        cmap = colormaps["coolwarm"]
+    else:
+        top = float(values.max(initial=0.0))
+        norm = colors.Normalize(vmin=0.0, vmax=top if top > 0 else 1.0)
+        cmap = colormaps["viridis"]
     surface = Poly3DCollection(
         deformed[faces], facecolors=_shaded(cmap(norm(face_value)), deformed[faces]), edgecolors="none"
     )
@@ -129,9 +184,9 @@ def plot_rest_and_deformed(
     ax.view_init(elev=20, azim=-60)
 
     mappable = cm.ScalarMappable(norm=norm, cmap=cmap)
-    mappable.set_array(magnitude)
-    fig.colorbar(mappable, ax=ax, shrink=0.6, pad=0.1, label="displacement magnitude |u| [m]")
-    ax.set_title(title if title is not None else f"rest (grey) and deformed; max |u| = {vmax:.3g} m")
+    mappable.set_array(values)
+    fig.colorbar(mappable, ax=ax, shrink=0.6, pad=0.1, label=bar_label)
+    ax.set_title(title if title is not None else f"rest (grey) and deformed; max |u| = {vmax_u:.3g} m")
     fig.savefig(os.fspath(path))
 
 

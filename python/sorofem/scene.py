@@ -88,6 +88,16 @@ Schema
     bounds = [[0.3, 1.0]]      # optional, one alpha range per cable
     method = "l-bfgs-b"        # optional: or "nelder-mead"
 
+    [output]                   # optional: what `sorofem run` writes, and where
+    directory = "results/beam" # relative to the scene file; `--out DIR` overrides it
+    summary = true             # summary.json          (each switch defaults to true)
+    vtu = true                 # result.vtu
+    png = true                 # shape.png + convergence.png, or trajectory.png with [dynamics]
+    cables = true              # cables.vtu (static scenes with cables)
+    pvd = true                 # trajectory.pvd + trajectory/ (scenes with [dynamics])
+    color_by = "displacement"  # shape.png's colours: "displacement", "von_mises", "J" or
+                               # "pressure" (kind = "mixed" only)
+
 Validation is strict: an unknown key, a wrong type, a missing mesh file, a ``[[fixed]]``
 entry selecting no node, a ``[[material.region]]`` entry selecting no element or an
 out-of-range value raises :class:`~sorofem.SceneError` with the file, the dotted key (e.g.
@@ -133,6 +143,7 @@ from .errors import InputError, ParameterError, SceneError
 from .inverse import _MATERIAL as _MATERIAL_PARAMETERS
 from .inverse import PARAMETERS
 from .io import read_mesh
+from .plot import COLOR_FIELDS
 from .targets import Target
 from .model import (
     FORMULATIONS,
@@ -874,6 +885,32 @@ _CONTROL = _Table(
     doc="sorofem control: find cable actuations that bring [target] closest.",
 )
 
+#: The files `sorofem run` writes, each switchable in [output] (defaults: all of them).
+_OUTPUT = _Table(
+    {
+        "directory": _Field(
+            _String(), "output folder, relative to the scene file (created); `--out DIR` on the command line "
+            "overrides it",
+        ),
+        "summary": _Field(_Boolean(), "write summary.json (solver report, timings, material, extreme values)",
+                          default=True),
+        "vtu": _Field(_Boolean(), "write result.vtu (deformed mesh with displacement, J, von Mises, pressure)",
+                      default=True),
+        "png": _Field(_Boolean(), "write the figures: shape.png and convergence.png, or trajectory.png with "
+                      "[dynamics]", default=True),
+        "cables": _Field(_Boolean(), "write cables.vtu (the cables as lines with their tension; static scenes "
+                         "with [[cable]] entries)", default=True),
+        "pvd": _Field(_Boolean(), "write trajectory.pvd and its frames in trajectory/ (scenes with [dynamics])",
+                      default=True),
+        "color_by": _Field(
+            _String(COLOR_FIELDS), "field that colours the deformed surface in shape.png: displacement magnitude, "
+            "von Mises stress, pressure (mixed formulation only) or the volume ratio J", default="displacement",
+        ),
+    },
+    doc="What sorofem run writes and where (every file is on by default); estimate and control also follow "
+    "directory, summary and vtu.",
+)
+
 _SCENE = _Table(
     {
         "mesh": _Field(_MESH, "the mesh", required=True, missing="a scene needs a [mesh] table"),
@@ -892,9 +929,10 @@ _SCENE = _Table(
         "target": _Field(_TARGET, "target of sorofem estimate / control"),
         "estimate": _Field(_ESTIMATE, "sorofem estimate options"),
         "control": _Field(_CONTROL, "sorofem control options"),
+        "output": _Field(_OUTPUT, "what sorofem run writes, and where"),
     },
-    doc="A sorofem scene: one simulation (mesh, material, supports, loads, solver, cables, dynamics, and the "
-    "target of an estimate or control).",
+    doc="A sorofem scene: one simulation (mesh, material, supports, loads, solver, cables, dynamics, the "
+    "target of an estimate or control, and the outputs).",
 )
 _TOP_KEYS = tuple(_SCENE.fields)
 
@@ -1057,6 +1095,15 @@ class Scene:
     #: Per element, the index of the ``[[material.region]]`` entry that set its material, or -1
     #: for ``[material]`` itself; ``(n_tets,)`` int64, or None without regions.
     material_region: np.ndarray | None = None
+    #: ``[output]`` with defaults filled in: ``directory`` (a Path, resolved against the scene
+    #: file's folder, or None), the switches ``summary``, ``vtu``, ``png``, ``cables``, ``pvd``
+    #: (booleans) and ``color_by``.
+    output: dict[str, Any] = field(
+        default_factory=lambda: {**_OUTPUT.check(_Checker(Path(), ""), {}, "output"), "directory": None}
+    )
+    #: The files the scene reads: itself, the mesh file and the ``[target]`` surface files
+    #: (``sorofem run`` never writes over them).
+    input_files: list[Path] = field(default_factory=list)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> "Scene":
@@ -1093,7 +1140,7 @@ class Scene:
         # Structure, types, ranges and allowed values (everything json_schema() says), with
         # defaults filled in; then what needs the mesh and the other files.
         data = _SCENE.check(check, raw, "")
-        for name in ("formulation", "loads", "solver"):
+        for name in ("formulation", "loads", "solver", "output"):
             if name not in data:
                 data[name] = _SCENE.fields[name].spec.check(check, {}, name)
 
@@ -1109,9 +1156,12 @@ class Scene:
         gravity = _apply_loads(check, data["loads"], body)
         cables = _apply_cables(check, data["cable"], body)
         dynamics = _build_dynamics(check, data["dynamics"], body) if "dynamics" in data else None
-        target = _build_target(check, data["target"], body, path.parent) if "target" in data else None
+        target, target_files = None, []
+        if "target" in data:
+            target, target_files = _build_target(check, data["target"], body, path.parent)
         estimate = _build_estimate(check, data["estimate"], regions) if "estimate" in data else None
         control = _build_control(check, data["control"], body) if "control" in data else None
+        output = _build_output(check, data["output"], formulation, path.parent)
         return cls(
             path=path,
             mesh=mesh,
@@ -1128,15 +1178,31 @@ class Scene:
             control=control,
             regions=regions,
             material_region=owner,
+            output=output,
+            input_files=[p for p in (path, mesh.source, *target_files) if p is not None],
         )
 
     def solve(self) -> StaticResult:
         """Run :func:`sorofem.solve_static` with the scene's loads and solver options."""
         return solve_static(self.body, self.gravity, **self.solver)
 
-    def simulate(self) -> Trajectory:
+    def simulate(
+        self, *, body: Body | None = None, equilibrium: StaticResult | None = None, progress: bool | None = None
+    ) -> Trajectory:
         """Run :func:`sorofem.simulate` with the scene's ``[dynamics]`` (from the rest shape,
         or from :meth:`solve`'s equilibrium with ``initial = "static"``).
+
+        Parameters
+        ----------
+        body
+            Integrate this body instead of ``scene.body`` (the viewer passes its own, with the
+            formulation and cable actuations set in the page); cables without keyframes hold
+            its actuations.
+        equilibrium
+            With ``initial = "static"``: the equilibrium of ``body`` to start from, if already
+            solved (default: solved here). Ignored with ``initial = "rest"``.
+        progress
+            See :func:`sorofem.simulate`.
 
         Raises
         ------
@@ -1146,11 +1212,14 @@ class Scene:
         if self.dynamics is None:
             raise InputError(f"{self.path}: the scene has no [dynamics] table")
         d = self.dynamics
-        initial = self.solve() if d["initial"] == "static" else None
+        body = self.body if body is None else body
+        initial = None
+        if d["initial"] == "static":
+            initial = equilibrium if equilibrium is not None else solve_static(body, self.gravity, **self.solver)
         return simulate(
-            self.body, d["dt"], d["steps"], actuation=d["actuation"], gravity=self.gravity,
+            body, d["dt"], d["steps"], actuation=d["actuation"], gravity=self.gravity,
             damping=(d["mass_damping"], d["stiffness_damping"]), initial=initial, save_every=d["save_every"],
-            tolerance=self.solver["tolerance"], max_iterations=self.solver["max_iterations"],
+            tolerance=self.solver["tolerance"], max_iterations=self.solver["max_iterations"], progress=progress,
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -1175,6 +1244,8 @@ class Scene:
                     np.column_stack([k.times, k.values]).tolist() for k in self.dynamics["actuation"]
                 ],
             },
+            "output": {**self.output, "directory": None if self.output["directory"] is None
+                       else str(self.output["directory"])},
         }
 
 
@@ -1377,9 +1448,28 @@ def _build_dynamics(check: _Checker, table: dict[str, Any], body: Body) -> dict[
     return options
 
 
-def _build_target(check: _Checker, table: dict[str, Any], body: Body, base: Path) -> Target:
+def _build_output(check: _Checker, table: dict[str, Any], formulation: str, base: Path) -> dict[str, Any]:
+    out = dict(table)
+    if "directory" in out:
+        if not out["directory"].strip():
+            raise check.error("output.directory", "expected a folder name, got an empty string")
+        folder = Path(out["directory"]).expanduser()
+        out["directory"] = folder if folder.is_absolute() else base / folder
+    else:
+        out["directory"] = None
+    if out["color_by"] == "pressure" and formulation != "mixed":
+        raise check.error(
+            "output.color_by",
+            f"'pressure' needs [formulation] kind = \"mixed\": the {formulation} formulation has no pressure field "
+            f"(choose one of {', '.join(repr(f) for f in COLOR_FIELDS if f != 'pressure')})",
+        )
+    return out
+
+
+def _build_target(check: _Checker, table: dict[str, Any], body: Body, base: Path) -> tuple[Target, list[Path]]:
+    """The target, and the surface files it was read from."""
+    files: dict[str, Path] = {}
     if "surface" in table:
-        files = {}
         for name in ("surface", "rest"):
             if name in table:
                 file = Path(table[name])
@@ -1418,7 +1508,7 @@ def _build_target(check: _Checker, table: dict[str, Any], body: Body, base: Path
         target.bind(body.mesh)
     except InputError as exc:
         raise check.error(key, str(exc)) from None
-    return target
+    return target, list(files.values())
 
 
 def _bounds(

@@ -8,7 +8,10 @@ alpha and re-solves, warm-started from the last equilibrium (``body.set_actuatio
 then :func:`sorofem.solve_static` with ``initial=`` the last result; a jump that does not
 converge is retried by continuation, :func:`sorofem.actuate`), and a dropdown that switches
 between the standard and the mixed formulation. A scene with ``[dynamics]`` is shown at its
-static equilibrium; to play its motion, simulate it and pass the trajectory to
+static equilibrium, and its button "simulate [dynamics]" (:meth:`View.simulate`; disabled, with
+a hint, when the scene has none) integrates the motion with the formulation and cable
+actuations set in the page and plays it in the same page with the playback controls below,
+until "back to static" (:meth:`View.show_static`). A trajectory of your own plays with
 :func:`view_trajectory`.
 
 **Playback** (:func:`build_trajectory_view`, :func:`view_trajectory`): a
@@ -33,6 +36,8 @@ Examples
 >>> view.sliders[0].value = 0.7     # re-solves, as dragging the slider does  # doctest: +SKIP
 >>> view.result.actuations                                   # doctest: +SKIP
 [0.7]
+>>> motion = view.simulate()     # a scene with [dynamics]: as the button; plays  # doctest: +SKIP
+>>> view.show_static()           # as "back to static"       # doctest: +SKIP
 
 Play a motion (serves on http://127.0.0.1:8080 until Ctrl-C):
 
@@ -88,6 +93,8 @@ SURFACE_COLOUR = (120, 170, 215)
 SPEEDS = (0.01, 0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0, 100.0)
 #: Most frames per second the playback sends to the browser (denser frames are skipped).
 PLAYBACK_FPS = 30.0
+#: Label of the scene view's button that simulates the scene's [dynamics] and plays the motion.
+SIMULATE_LABEL = "simulate [dynamics]"
 
 
 def _require_viser() -> Any:
@@ -152,6 +159,10 @@ class View:
         The deformed surface (a GLB node; its vertex colours are the displacement magnitude).
     status
         Markdown with the last solve's report or error.
+    simulate_button, motion, back_button
+        The button that simulates the scene's ``[dynamics]`` and plays it in the page
+        (:meth:`simulate`), the :class:`TrajectoryView` shown meanwhile (None at the static
+        view) and its "back to static" button (:meth:`show_static`).
     """
 
     server: Any
@@ -169,7 +180,20 @@ class View:
     status: Any = None
     #: Static solves shown so far (the initial one included).
     solves: int = 0
+    #: The "simulate [dynamics]" button (disabled, with a hint, when the scene has no [dynamics]).
+    simulate_button: Any = None
+    #: The playback of the last simulation while it is shown in place of the static view, else None.
+    motion: "TrajectoryView | None" = None
+    #: The playback's "back to static" button (None while the static view is shown).
+    back_button: Any = None
+    #: Simulations run from the page.
+    simulations: int = 0
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+    #: The static view's scene nodes and controls (hidden while a motion plays).
+    _static_nodes: list[Any] = field(default_factory=list, repr=False)
+    _static_controls: list[Any] = field(default_factory=list, repr=False)
+    #: Re-applies the wireframe / rest-shape checkboxes to the scene nodes.
+    _apply_toggles: Any = field(default=None, repr=False)
 
     @property
     def surface_vertices(self) -> NDArray[np.float64]:
@@ -222,6 +246,88 @@ class View:
                 return
             self.body = body
             self._show(result)
+
+    # -- the motion --------------------------------------------------------------------
+
+    def simulate(self, play: bool = True) -> "TrajectoryView | None":
+        """Integrate the scene's ``[dynamics]`` and play the motion in the page in place of the
+        static view (what the "simulate [dynamics]" button does).
+
+        The body is the one shown: its formulation and the cable actuations set with the
+        sliders (cables without ``[dynamics] actuation`` keyframes hold them); with
+        ``initial = "static"`` the motion starts from the equilibrium shown. The playback
+        (:func:`build_trajectory_view`, with a "back to static" button) replaces the static
+        view's surface and controls until :meth:`show_static`.
+
+        Returns
+        -------
+        TrajectoryView or None
+            The playback (``self.motion``); None when the simulation failed (the error is in the
+            status, and the static view stays).
+
+        Raises
+        ------
+        InputError
+            The scene has no ``[dynamics]`` table.
+        """
+        d = self.scene.dynamics
+        if d is None:
+            raise InputError(f"{self.scene.path}: the scene has no [dynamics] table to simulate")
+        with self._lock:
+            if self.motion is not None:
+                return self.motion
+            self._set_busy(True)
+            if self.status is not None:
+                self.status.content = self._summary() + (
+                    f"  \n**simulating** {d['steps']} steps of {d['dt']:g} s ...")
+            try:
+                trajectory = self.scene.simulate(body=self.body, equilibrium=self.result)
+            except SorofemError as exc:
+                self._set_busy(False)
+                self._report_error(f"simulation failed: {exc}")
+                return None
+            self._set_busy(False)
+            if self.status is not None:
+                self.status.content = self._summary()
+            self.simulations += 1
+            self._show_static_view(False)
+            frames = Frames.from_trajectory(trajectory, source=str(self.scene.path))
+            motion = build_trajectory_view(frames, self.server)
+            self.back_button = self.server.gui.add_button(
+                "back to static", icon="arrow-back-up", order=motion.header.order + 0.5,
+                hint="leave the playback: the static equilibrium with its cable sliders",
+            )
+            self.back_button.on_click(lambda _: self.show_static())
+            motion._handles.append(self.back_button)
+            self.motion = motion
+        if play:
+            motion.play()
+        return motion
+
+    def show_static(self) -> None:
+        """Remove the playback of :meth:`simulate` and show the static view again (the "back to
+        static" button); nothing to do when it is shown."""
+        with self._lock:
+            motion, self.motion, self.back_button = self.motion, None, None
+            if motion is None:
+                return
+            motion.remove()
+            self._show_static_view(True)
+
+    def _set_busy(self, busy: bool) -> None:
+        """Disable the static controls while a simulation runs."""
+        for handle in self._static_controls:
+            if hasattr(handle, "disabled") and handle is not self.simulate_button:
+                handle.disabled = busy
+        if self.simulate_button is not None:
+            self.simulate_button.disabled = busy
+            self.simulate_button.label = "simulating ..." if busy else SIMULATE_LABEL
+
+    def _show_static_view(self, visible: bool) -> None:
+        for handle in self._static_nodes + self._static_controls:
+            handle.visible = visible
+        if visible and self._apply_toggles is not None:
+            self._apply_toggles(None)
 
     # -- drawing -------------------------------------------------------------------
 
@@ -283,8 +389,9 @@ def build_view(scene: "Scene", server: Any, *, alpha_range: tuple[float, float] 
     Returns
     -------
     View
-        Its ``sliders``, ``formulation`` dropdown and ``surface`` handle; setting a slider's
-        ``.value`` from Python re-solves exactly as dragging it does.
+        Its ``sliders``, ``formulation`` dropdown, ``simulate_button`` and ``surface`` handle;
+        setting a slider's ``.value`` from Python re-solves exactly as dragging it does, and
+        ``simulate_button.value = True`` simulates and plays as a click does.
 
     Raises
     ------
@@ -317,20 +424,22 @@ def build_view(scene: "Scene", server: Any, *, alpha_range: tuple[float, float] 
         "/body/rest", body.mesh.points[nodes].astype(np.float32), view.surface_faces,
         color=REST_COLOUR, wireframe=True, visible=False,
     )
+    view._static_nodes += [view.surface, view.wireframe, rest]
     if body.fixed_nodes.size:
-        server.scene.add_point_cloud(
+        view._static_nodes.append(server.scene.add_point_cloud(
             "/body/fixed", body.mesh.points[body.fixed_nodes].astype(np.float32), FIXED_COLOUR,
             point_size=0.01 * size, point_shape="circle",
-        )
+        ))
     for c in range(len(body.cables)):
         view.cables.append(server.scene.add_line_segments(
             f"/cables/{c}", view._cable_segments(c).astype(np.float32), CABLE_COLOUR,
             thickness=3.0, thickness_units="screen",
         ))
+    view._static_nodes += view.cables
 
     gui = server.gui
-    gui.add_markdown(f"**{scene.path.name}**: {body.mesh.n_nodes} nodes, {body.mesh.n_tets} tets, "
-                     f"{len(body.cables)} cable(s)")
+    header = gui.add_markdown(f"**{scene.path.name}**: {body.mesh.n_nodes} nodes, {body.mesh.n_tets} tets, "
+                              f"{len(body.cables)} cable(s)")
     view.formulation = gui.add_dropdown("formulation", list(FORMULATIONS), initial_value=body.formulation)
     view.formulation.on_update(lambda event: view.set_formulation(event.target.value))
     for c, alpha in enumerate(body.actuations):
@@ -350,7 +459,19 @@ def build_view(scene: "Scene", server: Any, *, alpha_range: tuple[float, float] 
 
     see_through.on_update(_toggle)
     show_rest.on_update(_toggle)
+    view._apply_toggles = _toggle
+    dynamics = scene.dynamics
+    if dynamics is None:
+        hint = "the scene has no [dynamics] table: add one (dt, steps) to simulate and play its motion here"
+    else:
+        start = "the equilibrium shown" if dynamics["initial"] == "static" else "rest"
+        hint = (f"integrate the scene's [dynamics] ({dynamics['steps']} steps of {dynamics['dt']:g} s, implicit "
+                f"Euler) from {start}, with the formulation and cable actuations set here, and play the motion")
+    view.simulate_button = gui.add_button(SIMULATE_LABEL, icon="movie", disabled=dynamics is None, hint=hint)
+    view.simulate_button.on_click(lambda _: view.simulate())
     view.status = gui.add_markdown(view._summary())
+    view._static_controls += [header, view.formulation, *view.sliders, see_through, show_rest, view.simulate_button,
+                              view.status]
     return view
 
 
@@ -561,7 +682,7 @@ class TrajectoryView:
         Surface nodes coloured by displacement magnitude (a point cloud handle).
     cables
         One line-segments handle per cable.
-    slider, play_button, speed_dropdown, loop_checkbox, status
+    slider, play_button, speed_dropdown, loop_checkbox, status, header
         The GUI handles.
     frames_shown
         How many frames have been drawn (the initial one included).
@@ -585,10 +706,14 @@ class TrajectoryView:
     speed_dropdown: Any = None
     loop_checkbox: Any = None
     status: Any = None
+    #: The markdown line above the controls (what is played).
+    header: Any = None
     frames_shown: int = 0
     _lock: threading.RLock = field(default_factory=threading.RLock, repr=False)
     _thread: threading.Thread | None = field(default=None, repr=False)
     _closed: bool = field(default=False, repr=False)
+    #: Everything build_trajectory_view put on the server (scene nodes, then GUI controls), for remove().
+    _handles: list[Any] = field(default_factory=list, repr=False)
 
     @property
     def surface_vertices(self) -> NDArray[np.float64]:
@@ -700,6 +825,15 @@ class TrajectoryView:
         if thread is not None and thread is not threading.current_thread():
             thread.join()
 
+    def remove(self) -> None:
+        """Stop the playback and take the view off the server: its scene nodes and its controls
+        (what the scene view's "back to static" does)."""
+        self.close()
+        with self._lock:
+            handles, self._handles = self._handles, []
+        for handle in handles:
+            handle.remove()
+
     def _run(self) -> None:
         """The playback thread: advances a clock by ``speed`` times the real time elapsed and
         shows the last frame at or before it, at most PLAYBACK_FPS times a second; a frame
@@ -808,20 +942,25 @@ def build_trajectory_view(
         "/motion/rest", mesh.points[nodes].astype(np.float32), view.surface_faces, color=REST_COLOUR,
         wireframe=True, visible=False,
     )
+    view._handles += [view.surface, view.colours, view.rest]
     if frames.fixed_nodes.size:
-        server.scene.add_point_cloud(
+        view._handles.append(server.scene.add_point_cloud(
             "/motion/fixed", mesh.points[frames.fixed_nodes].astype(np.float32), FIXED_COLOUR,
             point_size=0.01 * size, point_shape="circle", precision="float32",
-        )
+        ))
     for c in range(frames.n_cables):
         view.cables.append(server.scene.add_line_segments(
             f"/motion/cables/{c}", view._cable_segments(0, c), CABLE_COLOUR, thickness=3.0, thickness_units="screen",
         ))
+    view._handles += view.cables
 
     gui = server.gui
     name = Path(frames.source).name if frames.source != "trajectory" else "trajectory"
-    gui.add_markdown(f"**{name}**: {mesh.n_nodes} nodes, {mesh.n_tets} tets, {frames.n_cables} cable(s), "
-                     f"{frames.n_frames} frames, t = {frames.times[0]:.4g} .. {frames.times[-1]:.4g} s")
+    view.header = gui.add_markdown(
+        f"**{name}**: {mesh.n_nodes} nodes, {mesh.n_tets} tets, {frames.n_cables} cable(s), "
+        f"{frames.n_frames} frames, t = {frames.times[0]:.4g} .. {frames.times[-1]:.4g} s"
+    )
+    view._handles.append(view.header)
     last = frames.n_frames - 1
     view.slider = gui.add_slider("frame", min=0, max=max(last, 1), step=1, initial_value=0, disabled=last < 1,
                                  hint="saved frame; its time is in the status below")
@@ -851,6 +990,8 @@ def build_trajectory_view(
     for box in (wireframe, coloured, show_rest):
         box.on_update(_toggle)
     view.status = gui.add_markdown("")
+    view._handles += [view.slider, view.play_button, view.speed_dropdown, view.loop_checkbox, wireframe, coloured,
+                      show_rest, view.status]
     view.show(0)
     if play:
         view.play()
