@@ -27,7 +27,9 @@ from sorofem.viewer import (  # noqa: E402
     build_trajectory_view,
     build_view,
     colour_by_magnitude,
+    colour_field,
     load_frames,
+    nodal_field,
     rebuild_body,
 )
 
@@ -102,6 +104,49 @@ def test_colour_map() -> None:
     assert colours.shape == (3, 4) and colours.dtype == np.uint8
     assert not np.array_equal(colours[0], colours[2])
     assert np.array_equal(colour_by_magnitude(np.zeros(2))[0], colour_by_magnitude(np.zeros(2))[1])
+
+
+def _glb_colours(glb: bytes) -> np.ndarray:
+    loaded = trimesh.load(io.BytesIO(glb), file_type="glb", process=False)
+    geometry = loaded.geometry if hasattr(loaded, "geometry") else {"mesh": loaded}
+    return np.concatenate([g.visual.vertex_colors for g in geometry.values()])
+
+
+def test_colour_by_dropdown_shows_stress_and_pressure(server) -> None:
+    scene = sf.Scene.load(SCENES / "cable_cantilever.toml")
+    view = build_view(scene, server)
+    by_displacement = _glb_colours(view.surface.glb_data)
+    view.colour_dropdown.value = "von_mises"  # as a browser selection would
+    assert view.colour_by == "von_mises" and "von Mises" in view.status.content
+    assert not np.array_equal(_glb_colours(view.surface.glb_data), by_displacement)
+    solves = view.solves
+    view.colour_dropdown.value = "pressure"  # standard formulation: refused, colouring kept
+    assert view.colour_by == "von_mises" and "mixed" in view.status.content and view.solves == solves
+    view.formulation.value = "mixed"
+    view.colour_dropdown.value = "pressure"
+    assert view.colour_by == "pressure" and "pressure" in view.status.content
+    view.formulation.value = "standard"  # no pressure any more: back to displacement
+    assert view.colour_by == "displacement" and view.colour_dropdown.value == "displacement"
+
+
+def test_nodal_fields_of_a_homogeneous_stretch() -> None:
+    """Element fields averaged to the nodes: a homogeneous state gives every node its value."""
+    mesh = sf.Mesh.box(size=(0.1, 0.05, 0.05), cells=(4, 2, 2))
+    body = sf.Body(mesh, sf.NeoHookean(youngs_modulus=1e5, poisson_ratio=0.3), formulation="mixed")
+    stretch = 0.02 * mesh.points[:, 0:1] * np.array([[1.0, 0.0, 0.0]])
+    boundary = np.unique(mesh.boundary_faces())
+    body.fix(boundary, stretch[boundary])
+    result = sf.solve_static(body)
+    for name in ("von_mises", "J"):
+        values, _ = nodal_field(result, name)
+        element = result.von_mises if name == "von_mises" else result.J
+        np.testing.assert_allclose(values, element.mean(), rtol=1e-6)
+    pressure, label = nodal_field(result, "pressure")
+    np.testing.assert_allclose(pressure, result.pressure) and label.startswith("pressure")
+    colours, scale = colour_field(np.array([0.9, 1.0, 1.1]), "J")  # diverging, centred on 1
+    assert np.array_equal(colours[1], colour_field(np.array([1.0]), "J")[0][0]) and scale.startswith("0.9")
+    with pytest.raises(sf.InputError, match="colour field"):
+        nodal_field(result, "temperature")
 
 
 # ---------------------------------------------------------------------------

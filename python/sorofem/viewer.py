@@ -2,7 +2,8 @@
 equilibrium with live cable sliders, or the playback of a time integration.
 
 The view shows the deformed boundary surface coloured by displacement magnitude (viridis, scaled
-to the current maximum), the cables as red polylines, the fixed nodes as blue points and,
+to the current maximum) or, chosen in the "colour by" dropdown, by von Mises stress, pressure
+(mixed formulation) or J (diverging maps centred on 0 and 1), the cables as red polylines, the fixed nodes as blue points and,
 optionally, the rest shape. The control panel has one slider per cable that sets its actuation
 alpha and re-solves, warm-started from the last equilibrium (``body.set_actuation(i, alpha)``,
 then :func:`sorofem.solve_static` with ``initial=`` the last result; a jump that does not
@@ -74,6 +75,9 @@ __all__ = [
     "View",
     "build_view",
     "colour_by_magnitude",
+    "COLOUR_FIELDS",
+    "nodal_field",
+    "colour_field",
     "rebuild_body",
     "Frames",
     "load_frames",
@@ -105,6 +109,51 @@ def _require_viser() -> Any:
             "sorofem view needs the optional dependency viser: pip install 'sorofem[viewer]'"
         ) from None
     return viser
+
+
+#: Fields the static view can colour the surface by (the dropdown "colour by").
+COLOUR_FIELDS = ("displacement", "von_mises", "pressure", "J")
+
+
+def nodal_field(result: "StaticResult", field_name: str) -> tuple[NDArray[np.float64], str]:
+    """Per node the value of ``field_name`` and its label: ``displacement`` (|u|, m),
+    ``pressure`` (Pa, the mixed formulation's nodal field), or the element fields
+    ``von_mises`` (Pa) and ``J`` averaged over each node's elements, weighted by volume.
+
+    Raises
+    ------
+    InputError
+        An unknown field, or ``pressure`` of a result without one (standard formulation).
+    """
+    if field_name not in COLOUR_FIELDS:
+        raise InputError(f"colour field: expected one of {list(COLOUR_FIELDS)}, got {field_name!r}")
+    if field_name == "displacement":
+        return np.linalg.norm(result.displacement, axis=1), "|u| [m]"
+    if field_name == "pressure":
+        if result.pressure is None:
+            raise InputError("colour field 'pressure': only the mixed formulation has a pressure field")
+        return np.asarray(result.pressure, dtype=np.float64), "pressure [Pa]"
+    values = np.asarray(result.von_mises if field_name == "von_mises" else result.J, dtype=np.float64)
+    mesh = result.mesh
+    weight = np.repeat(mesh.volumes, 4)
+    total = np.bincount(mesh.tets.reshape(-1), weights=weight * np.repeat(values, 4), minlength=mesh.n_nodes)
+    volume = np.bincount(mesh.tets.reshape(-1), weights=weight, minlength=mesh.n_nodes)
+    return total / np.where(volume > 0, volume, 1.0), "von Mises [Pa]" if field_name == "von_mises" else "J"
+
+
+def colour_field(values: NDArray[np.float64], field_name: str) -> tuple[NDArray[np.uint8], str]:
+    """RGBA colours ``(n, 4)`` of a field and a description of the scale: magnitudes
+    (displacement, von Mises) on viridis from 0 to their maximum, signed fields on a diverging
+    map centred on their neutral value (pressure on 0, J on 1), symmetric about it."""
+    from matplotlib import colormaps
+
+    if field_name in ("pressure", "J"):
+        centre = 0.0 if field_name == "pressure" else 1.0
+        spread = float(np.max(np.abs(values - centre), initial=0.0))
+        scaled = 0.5 + 0.5 * (values - centre) / spread if spread > 0 else np.full_like(values, 0.5)
+        colours = (colormaps["coolwarm"](np.clip(scaled, 0.0, 1.0)) * 255).round().astype(np.uint8)
+        return colours, f"{centre - spread:.3g} .. {centre + spread:.3g} (blue .. red)"
+    return colour_by_magnitude(values), f"0 .. {float(np.max(values, initial=0.0)):.3g}"
 
 
 def colour_by_magnitude(values: NDArray[np.float64], vmax: float | None = None) -> NDArray[np.uint8]:
@@ -156,7 +205,7 @@ class View:
     formulation
         The standard/mixed dropdown; setting ``.value`` rebuilds the body and re-solves.
     surface
-        The deformed surface (a GLB node; its vertex colours are the displacement magnitude).
+        The deformed surface (a GLB node; its vertex colours show ``colour_by``).
     status
         Markdown with the last solve's report or error.
     simulate_button, motion, back_button
@@ -188,6 +237,9 @@ class View:
     back_button: Any = None
     #: Simulations run from the page.
     simulations: int = 0
+    #: The field the surface is coloured by (one of :data:`COLOUR_FIELDS`) and its dropdown.
+    colour_by: str = "displacement"
+    colour_dropdown: Any = None
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
     #: The static view's scene nodes and controls (hidden while a motion plays).
     _static_nodes: list[Any] = field(default_factory=list, repr=False)
@@ -334,10 +386,9 @@ class View:
     def _surface_glb(self) -> bytes:
         import trimesh
 
-        magnitude = np.linalg.norm(self.result.displacement[self.surface_nodes], axis=1)
-        mesh = trimesh.Trimesh(
-            self.surface_vertices, self.surface_faces, vertex_colors=colour_by_magnitude(magnitude), process=False
-        )
+        values, _ = nodal_field(self.result, self.colour_by)
+        colours, _ = colour_field(values[self.surface_nodes], self.colour_by)
+        mesh = trimesh.Trimesh(self.surface_vertices, self.surface_faces, vertex_colors=colours, process=False)
         with io.BytesIO() as buffer:
             mesh.export(buffer, file_type="glb")
             return buffer.getvalue()
@@ -346,9 +397,31 @@ class View:
         points = self.result.cable_points[c]
         return np.stack([points[:-1], points[1:]], axis=1)
 
-    def _show(self, result: "StaticResult") -> None:
+    def set_colour(self, field_name: str) -> None:
+        """Colour the surface by ``field_name`` (one of :data:`COLOUR_FIELDS`; what the "colour
+        by" dropdown does). ``pressure`` needs the mixed formulation: otherwise the status says
+        so and the colouring is kept."""
+        # Setting the dropdown from here calls back with the value already in force: nothing
+        # to do, and the lock is held by the caller then.
+        if field_name == self.colour_by:
+            return
+        with self._lock:
+            if field_name == "pressure" and self.result.pressure is None:
+                self._report_error("colour by pressure: switch the formulation to mixed first")
+                if self.colour_dropdown is not None:
+                    self.colour_dropdown.value = self.colour_by
+                return
+            nodal_field(self.result, field_name)  # validates the name
+            self.colour_by = field_name
+            self._show(self.result, count=False)
+
+    def _show(self, result: "StaticResult", count: bool = True) -> None:
+        if result.pressure is None and self.colour_by == "pressure":
+            self.colour_by = "displacement"  # back to standard: no pressure to show
+            if self.colour_dropdown is not None:
+                self.colour_dropdown.value = self.colour_by
         self.result = result
-        self.solves += 1
+        self.solves += int(count)
         if self.surface is not None:
             self.surface.glb_data = self._surface_glb()
         if self.wireframe is not None:
@@ -363,8 +436,10 @@ class View:
         lines = [
             f"**{self.body.formulation}**, {r.report.iterations} Newton iterations, "
             f"{r.report.timings.get('total', float('nan')) * 1e3:.0f} ms",
-            f"max |u| = {r.max_displacement * 1e3:.3g} mm (colour scale 0 .. max)",
+            f"max |u| = {r.max_displacement * 1e3:.3g} mm",
         ]
+        values, label = nodal_field(r, self.colour_by)
+        lines.append(f"colours: {label}, {colour_field(values[self.surface_nodes], self.colour_by)[1]}")
         for c, tension in enumerate(r.cable_tensions):
             lines.append(f"cable {c}: alpha {r.actuations[c]:.3f}, tension {tension.min():.3g} .. {tension.max():.3g} N")
         return "  \n".join(lines)
@@ -449,6 +524,12 @@ def build_view(scene: "Scene", server: Any, *, alpha_range: tuple[float, float] 
         )
         slider.on_update(lambda event, c=c: view.set_actuation(c, float(event.target.value)))
         view.sliders.append(slider)
+    initial_colour = scene.output.get("color_by", "displacement") if hasattr(scene, "output") else "displacement"
+    view.colour_by = initial_colour if (initial_colour != "pressure" or result.pressure is not None) else "displacement"
+    view._show(result, count=False)
+    view.colour_dropdown = gui.add_dropdown("colour by", list(COLOUR_FIELDS), initial_value=view.colour_by,
+                                            hint="pressure: mixed formulation only")
+    view.colour_dropdown.on_update(lambda event: view.set_colour(str(event.target.value)))
     see_through = gui.add_checkbox("wireframe (see the cables)", initial_value=False)
     show_rest = gui.add_checkbox("show rest shape", initial_value=False)
 
@@ -470,8 +551,8 @@ def build_view(scene: "Scene", server: Any, *, alpha_range: tuple[float, float] 
     view.simulate_button = gui.add_button(SIMULATE_LABEL, icon="movie", disabled=dynamics is None, hint=hint)
     view.simulate_button.on_click(lambda _: view.simulate())
     view.status = gui.add_markdown(view._summary())
-    view._static_controls += [header, view.formulation, *view.sliders, see_through, show_rest, view.simulate_button,
-                              view.status]
+    view._static_controls += [header, view.formulation, *view.sliders, view.colour_dropdown, see_through, show_rest,
+                              view.simulate_button, view.status]
     return view
 
 
