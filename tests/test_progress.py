@@ -230,3 +230,17 @@ def test_stderr_is_looked_up_when_the_line_is_created(monkeypatch) -> None:
     with Progress(total=1, refresh=None) as bar:
         bar.update()
     assert fake.getvalue().endswith("\n") and "100%" in fake.getvalue()
+
+
+def test_static_solve_line_shows_elapsed_time_and_iterations(monkeypatch) -> None:
+    stream = FakeTTY()
+    monkeypatch.setattr(sys, "stderr", stream)
+    body = _cantilever()
+    result = sf.solve_static(body, gravity=(0, 0, -9.81), progress=True)
+    text = stream.getvalue()
+    assert "static solve" in text and f"{result.report.iterations} Newton iterations" in text
+    assert text.endswith("\n")
+    stream = FakeTTY()
+    monkeypatch.setattr(sys, "stderr", stream)
+    sf.solve_static(body, gravity=(0, 0, -9.81))  # automatic: a quick solve prints nothing
+    assert stream.getvalue() == ""

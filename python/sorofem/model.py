@@ -1212,6 +1212,7 @@ def solve_static(
     max_iterations: int = 50,
     load_steps: int = 1,
     initial: ArrayLike | StaticResult | None = None,
+    progress: bool | None = None,
 ) -> StaticResult:
     """Static equilibrium of a body under gravity, nodal forces and prescribed displacements.
 
@@ -1233,6 +1234,10 @@ def solve_static(
     initial
         Initial guess of the deformed **positions** ``(n_nodes, 3)`` (or a previous
         :class:`StaticResult`); default: the rest shape.
+    progress
+        A line on stderr with the elapsed time while the solve runs (``None``: only on a
+        terminal and only for solves longer than half a second; see :mod:`sorofem.progress`),
+        then the iterations and load steps it took.
 
     Returns
     -------
@@ -1264,15 +1269,21 @@ def solve_static(
         initial = initial.positions
     x0 = None if initial is None else _as_finite(initial, "initial", (n, 3))
 
+    from .progress import Progress
+
     model = body._core_model()
     model.set_material(*body.material.per_element(body.mesh.n_tets))
-    try:
-        out = model.solve(g, body._forces.copy(), body._prescribed.copy(), x0, tol, iters, steps)
-    except ConvergenceError as err:
-        if isinstance(err.report, dict):
-            err.report = SolveReport.from_dict(err.report)
-        raise
-    report = SolveReport.from_dict(out)
+    # The core solves in one call (the GIL released): the line can only show the elapsed time.
+    with Progress(total=1, desc="static solve", unit="solve", enabled=progress) as bar:
+        try:
+            out = model.solve(g, body._forces.copy(), body._prescribed.copy(), x0, tol, iters, steps)
+        except ConvergenceError as err:
+            if isinstance(err.report, dict):
+                err.report = SolveReport.from_dict(err.report)
+            raise
+        report = SolveReport.from_dict(out)
+        bar.set(1, postfix=f"{report.iterations} Newton iterations, {report.load_steps} load step(s), "
+                           f"{report.cutbacks} cut-back(s)")
     cable_points, cable_tensions = out.get("cable_points"), out.get("cable_tensions")
     return StaticResult(
         body, out["positions"], out.get("pressure"), report, reactions=out.get("reactions"),
