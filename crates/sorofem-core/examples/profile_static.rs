@@ -28,7 +28,9 @@ fn main() {
             _ => {}
         }
     }
+    let t = Instant::now();
     let (mesh, _) = TetMesh::try_new(points, &tets, Orientation::Reorient).unwrap();
+    println!("mesh build {:.4} s", t.elapsed().as_secs_f64());
     let mesh = Arc::new(mesh);
     let xmin = mesh
         .rest()
