@@ -7,6 +7,7 @@ only with SOROFEM_BROWSER_TEST=1 (`make test-viewer` sets it) and skips when eit
 
 from __future__ import annotations
 
+import contextlib
 import io
 import os
 import shutil
@@ -407,99 +408,77 @@ def test_failed_simulation_keeps_the_static_view(server, tmp_path, monkeypatch) 
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 
+browser_test = pytest.mark.skipif(
+    os.environ.get("SOROFEM_BROWSER_TEST") != "1" or CHROMIUM is None,
+    reason="real-browser test (~7 s): run by `make test-viewer` (SOROFEM_BROWSER_TEST=1), needs Debian's chromium",
+)
 
-@pytest.mark.skipif(os.environ.get("SOROFEM_BROWSER_TEST") != "1",
-                    reason="real-browser test (~7 s): run by `make test-viewer` (SOROFEM_BROWSER_TEST=1)")
-@pytest.mark.skipif(CHROMIUM is None, reason="no chromium executable (apt-get install chromium)")
-def test_browser_loads_the_view(server) -> None:
+
+@contextlib.contextmanager
+def _browser_page(server, ready_text: str):
+    """A headless Chromium page on ``server``'s view, once ``ready_text`` shows and the client is
+    connected; yields ``(page, errors)`` with the page's JavaScript errors."""
     sync_api = pytest.importorskip("playwright.sync_api", reason="playwright Python package not installed")
-    view = build_view(sf.Scene.load(SCENES / "cable_cantilever.toml"), server)
-    url = f"http://127.0.0.1:{server.get_port()}"
+    errors: list[str] = []
     with sync_api.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, headless=True,
                                     args=["--no-sandbox", "--use-gl=swiftshader", "--enable-unsafe-swiftshader"])
         try:
             page = browser.new_page()
-            page.goto(url)
+            page.on("pageerror", lambda exc: errors.append(str(exc)))
+            page.goto(f"http://127.0.0.1:{server.get_port()}")
             page.wait_for_selector("canvas", timeout=30_000)
-            page.get_by_text("cable 0 alpha").first.wait_for(timeout=30_000)
-            deadline = time.time() + 10
-            while not server.get_clients() and time.time() < deadline:
-                time.sleep(0.1)
-            assert server.get_clients(), "the browser did not connect to the viser server"
-            # A change made on the server reaches the connected client without errors.
-            view.sliders[0].value = 0.7
-            page.wait_for_timeout(500)
-            assert view.solves == 2
+            page.get_by_text(ready_text).first.wait_for(timeout=30_000)
+            assert _wait(lambda: bool(server.get_clients()), 10.0), "the browser did not connect"
+            yield page, errors
         finally:
             browser.close()
 
 
-@pytest.mark.skipif(os.environ.get("SOROFEM_BROWSER_TEST") != "1",
-                    reason="real-browser test (~7 s): run by `make test-viewer` (SOROFEM_BROWSER_TEST=1)")
-@pytest.mark.skipif(CHROMIUM is None, reason="no chromium executable (apt-get install chromium)")
+@browser_test
+def test_browser_loads_the_view(server) -> None:
+    view = build_view(sf.Scene.load(SCENES / "cable_cantilever.toml"), server)
+    with _browser_page(server, "cable 0 alpha") as (page, errors):
+        # A change made on the server reaches the connected client without errors.
+        view.sliders[0].value = 0.7
+        page.wait_for_timeout(500)
+        assert view.solves == 2
+    assert not errors, errors
+
+
+@browser_test
 def test_browser_plays_a_trajectory(server, trajectory) -> None:
-    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright Python package not installed")
     view = build_trajectory_view(trajectory, server, speed=0.5)
-    url = f"http://127.0.0.1:{server.get_port()}"
-    errors: list[str] = []
     try:
-        with sync_api.sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=CHROMIUM, headless=True,
-                                        args=["--no-sandbox", "--use-gl=swiftshader", "--enable-unsafe-swiftshader"])
-            try:
-                page = browser.new_page()
-                page.on("pageerror", lambda exc: errors.append(str(exc)))
-                page.goto(url)
-                page.wait_for_selector("canvas", timeout=30_000)
-                page.get_by_text("speed (x real time)").first.wait_for(timeout=30_000)
-                assert _wait(lambda: bool(server.get_clients()), 10.0), "the browser did not connect"
-                # The play button in the page starts the playback on the server.
-                page.get_by_role("button", name="play").first.click()
-                assert _wait(lambda: view.playing, 10.0), "clicking play in the browser did nothing"
-                assert _wait(lambda: view.frame >= 2, 10.0)
-                page.get_by_role("button", name="pause").first.click()
-                assert _wait(lambda: not view.playing, 10.0)
-                page.wait_for_timeout(300)
-            finally:
-                browser.close()
+        with _browser_page(server, "speed (x real time)") as (page, errors):
+            # The play button in the page starts the playback on the server.
+            page.get_by_role("button", name="play").first.click()
+            assert _wait(lambda: view.playing, 10.0), "clicking play in the browser did nothing"
+            assert _wait(lambda: view.frame >= 2, 10.0)
+            page.get_by_role("button", name="pause").first.click()
+            assert _wait(lambda: not view.playing, 10.0)
+            page.wait_for_timeout(300)
     finally:
         view.close()
     assert not errors, errors
 
 
-@pytest.mark.skipif(os.environ.get("SOROFEM_BROWSER_TEST") != "1",
-                    reason="real-browser test (~7 s): run by `make test-viewer` (SOROFEM_BROWSER_TEST=1)")
-@pytest.mark.skipif(CHROMIUM is None, reason="no chromium executable (apt-get install chromium)")
+@browser_test
 @needs_dynamics
 def test_browser_simulates_and_plays_a_scene(server, tmp_path) -> None:
-    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright Python package not installed")
     view = build_view(sf.Scene.load(_dynamic_scene(tmp_path)), server)
-    url = f"http://127.0.0.1:{server.get_port()}"
-    errors: list[str] = []
     try:
-        with sync_api.sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=CHROMIUM, headless=True,
-                                        args=["--no-sandbox", "--use-gl=swiftshader", "--enable-unsafe-swiftshader"])
-            try:
-                page = browser.new_page()
-                page.on("pageerror", lambda exc: errors.append(str(exc)))
-                page.goto(url)
-                page.wait_for_selector("canvas", timeout=30_000)
-                page.get_by_role("button", name="simulate [dynamics]").first.wait_for(timeout=30_000)
-                assert _wait(lambda: bool(server.get_clients()), 10.0), "the browser did not connect"
-                page.get_by_role("button", name="simulate [dynamics]").first.click()
-                assert _wait(lambda: view.motion is not None, 20.0), "clicking simulate in the browser did nothing"
-                motion = view.motion
-                page.get_by_text("speed (x real time)").first.wait_for(timeout=30_000)  # the playback controls
-                page.get_by_text("cable 0 alpha").first.wait_for(state="hidden", timeout=10_000)  # static ones hidden
-                assert _wait(lambda: motion.frames_shown > 1, 10.0)  # it plays
-                page.get_by_role("button", name="back to static").first.click()
-                assert _wait(lambda: view.motion is None, 10.0), "clicking back to static did nothing"
-                page.get_by_text("cable 0 alpha").first.wait_for(state="visible", timeout=10_000)
-                page.wait_for_timeout(300)
-            finally:
-                browser.close()
+        with _browser_page(server, "simulate [dynamics]") as (page, errors):
+            page.get_by_role("button", name="simulate [dynamics]").first.click()
+            assert _wait(lambda: view.motion is not None, 20.0), "clicking simulate in the browser did nothing"
+            motion = view.motion
+            page.get_by_text("speed (x real time)").first.wait_for(timeout=30_000)  # the playback controls
+            page.get_by_text("cable 0 alpha").first.wait_for(state="hidden", timeout=10_000)  # static ones hidden
+            assert _wait(lambda: motion.frames_shown > 1, 10.0)  # it plays
+            page.get_by_role("button", name="back to static").first.click()
+            assert _wait(lambda: view.motion is None, 10.0), "clicking back to static did nothing"
+            page.get_by_text("cable 0 alpha").first.wait_for(state="visible", timeout=10_000)
+            page.wait_for_timeout(300)
     finally:
         if view.motion is not None:
             view.motion.close()

@@ -47,7 +47,7 @@ from __future__ import annotations
 import numbers
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -184,24 +184,30 @@ def _volume_types(types: set[str]) -> list[str]:
     return sorted(t for t in types if t != "tetra" and dims.get(t) == 3)
 
 
-def _read_meshio(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """Points, tets and per-tet tags (or None) of a file meshio reads."""
+def meshio_read(path: str | os.PathLike[str], what: str) -> Any:
+    """``meshio.read(path)``, with any failure as a :class:`MeshError` naming the file and
+    ``what`` it should hold ("mesh", "surface"). meshio prints the error of every reader it
+    tries (for .msh: ANSYS before Gmsh) to stdout, which would corrupt `sorofem info --json`;
+    that text goes into the error message instead."""
     import contextlib
     import io as _io
 
     import meshio
 
-    # meshio prints the error of every reader it tries (for .msh: ANSYS before Gmsh) to stdout,
-    # which would corrupt `sorofem info --json`; keep that text for the error message instead.
     tried = _io.StringIO()
     try:
         with contextlib.redirect_stdout(tried):
-            m = meshio.read(path)
+            return meshio.read(path)
     except Exception as exc:  # meshio raises many types (ReadError, KeyError, ...)
         detail = " ".join(tried.getvalue().split())
         raise MeshError(
-            f"{path}: could not read the mesh with meshio: {exc}" + (f" ({detail})" if detail else "")
+            f"{path}: could not read the {what} with meshio: {exc}" + (f" ({detail})" if detail else "")
         ) from None
+
+
+def _read_meshio(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Points, tets and per-tet tags (or None) of a file meshio reads."""
+    m = meshio_read(path, "mesh")
     volume = _volume_types({c.type for c in m.cells})
     if volume:
         counts = ", ".join(f"{sum(len(c.data) for c in m.cells if c.type == t)} {t}" for t in volume)

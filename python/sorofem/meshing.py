@@ -187,24 +187,13 @@ def read_surface(path: PathLike, scale: float = 1.0) -> tuple[NDArray[np.float64
     --------
     >>> points, triangles = sf.meshing.read_surface("finger.stl", scale=1e-3)  # doctest: +SKIP
     """
-    import contextlib
-    import io as _io
-
-    import meshio
+    from .io import meshio_read
 
     scale = _positive(scale, "scale")
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"surface file not found: {path}")
-    tried = _io.StringIO()  # meshio prints the errors of the readers it tries
-    try:
-        with contextlib.redirect_stdout(tried):
-            m = meshio.read(path)
-    except Exception as exc:  # meshio raises many types (ReadError, KeyError, ...)
-        detail = " ".join(tried.getvalue().split())
-        raise MeshError(
-            f"{path}: could not read the surface with meshio: {exc}" + (f" ({detail})" if detail else "")
-        ) from None
+    m = meshio_read(path, "surface")
     blocks: list[np.ndarray] = []
     for cells in m.cells:
         data = np.asarray(cells.data, dtype=np.int64)
