@@ -22,7 +22,8 @@ pub struct Assembler {
     /// Per term: free index of each local DOF (`n_el * s`, FIXED when eliminated).
     local_free: Vec<Vec<u32>>,
     /// Per term: for each stored Hessian entry `p`, the local Hessian entries that add into it,
-    /// `gather_index[gather_ptr[p]..gather_ptr[p + 1]]`, each `e * s * s + a * s + b`, in
+    /// `gather_index[gather_ptr[p]..gather_ptr[p + 1]]`, each the offset of element `e`'s entry
+    /// `(a, b)` in the per-element buffer, `e (1 + s + s^2) + 1 + s + a s + b`, in
     /// increasing element order.
     gather: Vec<Gather>,
 }
@@ -149,9 +150,18 @@ impl Assembler {
                 }
                 let mut next = ptr.clone();
                 let mut index = vec![0u32; ptr[pattern.nnz()] as usize];
+                // Store where the entry sits in the per-element buffer of an evaluation with a
+                // Hessian (energy, s gradient values, s * s Hessian values per element): a
+                // division per gathered entry would cost as much as the whole gather.
+                let stride = 1 + s + s * s;
+                assert!(
+                    term.n_elements() * stride < FIXED as usize,
+                    "per-element buffer exceeds u32 indexing"
+                );
                 for (local, &p) in positions.iter().enumerate() {
                     if p != FIXED {
-                        index[next[p as usize] as usize] = local as u32;
+                        let (e, ab) = (local / (s * s), local % (s * s));
+                        index[next[p as usize] as usize] = (e * stride + 1 + s + ab) as u32;
                         next[p as usize] += 1;
                     }
                 }
@@ -279,8 +289,11 @@ impl Assembler {
         }
         if want_hess {
             let gather = &self.gather[t];
-            let ss = s * s;
-            let hessian_offset = 1 + s;
+            debug_assert_eq!(
+                stride,
+                1 + s + s * s,
+                "the gather offsets assume this layout"
+            );
             out.hessian
                 .par_chunks_mut(4096)
                 .enumerate()
@@ -289,10 +302,11 @@ impl Assembler {
                     for (k, value) in values.iter_mut().enumerate() {
                         let p = first + k;
                         let range = gather.ptr[p] as usize..gather.ptr[p + 1] as usize;
-                        for &local in &gather.index[range] {
-                            let local = local as usize;
-                            *value += work[(local / ss) * stride + hessian_offset + local % ss];
-                        }
+                        let sum: f64 = gather.index[range]
+                            .iter()
+                            .map(|&offset| work[offset as usize])
+                            .sum();
+                        *value += sum;
                     }
                 });
         }
