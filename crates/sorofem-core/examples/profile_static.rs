@@ -78,7 +78,8 @@ fn main() {
         })
         .unwrap();
     let mut deformed = vec![0.0; 3 * mesh.n_nodes()];
-    for _ in 0..3 {
+    let solves = env("PROFILE_SOLVES", 3.0) as usize;
+    for _ in 0..solves {
         let t = Instant::now();
         let s = model
             .solve(
@@ -108,6 +109,9 @@ fn main() {
                 println!("  {k:3} residual {res:.3e} step {step:.4}");
             }
         }
+    }
+    if std::env::var_os("PROFILE_SOLVES_ONLY").is_some() {
+        return;
     }
     // Isolated kernels.
     let n = mesh.n_nodes();
