@@ -12,8 +12,11 @@
 //! Eliminating p (`C p = phi`) gives back `W_mu + 1/2 phi^T C^{-1} phi`, which tends to the standard
 //! energy as the mesh is refined, so both formulations solve the same continuum model.
 
-use super::{add_isotropic_tet_hessian, add_tet_gradient, add_tet_hessian, HessianMode, Term};
-use crate::material::{project_to_psd, volumetric_tangent, NeoHookean, Tangent, Volumetric};
+use super::{
+    add_isotropic_tet_hessian, add_projected_isotropic_tet_hessian, add_tet_gradient, HessianMode,
+    Term,
+};
+use crate::material::{NeoHookean, Volumetric};
 use crate::mesh::TetMesh;
 use std::sync::Arc;
 
@@ -91,11 +94,9 @@ impl ElasticTerm {
         mode: HessianMode,
     ) -> f64 {
         let h = self.displacement_gradient(e, z);
-        // The general 9x9 tangent is only needed to project it.
-        let need_tangent = hess.is_some() && mode == HessianMode::Projected;
         let Some(r) = self
             .material(e)
-            .response_from_displacement_gradient(&h, need_tangent)
+            .response_from_displacement_gradient(&h, false)
         else {
             return f64::INFINITY;
         };
@@ -107,25 +108,31 @@ impl ElasticTerm {
         }
         if let Some(hess) = hess {
             hess.fill(0.0);
+            let material = self.material(e);
+            let f = crate::material::Mat3::identity() + h;
+            let Some((gt, j)) = crate::material::inverse_transpose(&f) else {
+                return f64::INFINITY;
+            };
+            let (c, dc, d2c) = material
+                .volumetric
+                .measure_near_one(crate::material::neo_hookean::j_minus_one(&h));
+            let dh = material.lambda * c * dc;
+            let d2h = material.lambda * (dc * dc + c * d2c);
+            let (alpha, beta) = (material.mu - dh * j, d2h * j * j + dh * j);
             match mode {
-                HessianMode::Projected => {
-                    let tangent = r.tangent.expect("tangent requested");
-                    add_tet_hessian(volume, g, &project_to_psd(&tangent), hess, 12);
-                }
+                HessianMode::Projected => add_projected_isotropic_tet_hessian(
+                    volume,
+                    g,
+                    &f,
+                    &gt,
+                    material.mu,
+                    alpha,
+                    beta,
+                    hess,
+                    12,
+                ),
                 HessianMode::Exact => {
-                    let material = self.material(e);
-                    let Some((gt, j)) = crate::material::inverse_transpose(
-                        &(crate::material::Mat3::identity() + h),
-                    ) else {
-                        return f64::INFINITY;
-                    };
-                    let (c, dc, d2c) = material
-                        .volumetric
-                        .measure_near_one(crate::material::neo_hookean::j_minus_one(&h));
-                    let dh = material.lambda * c * dc;
-                    let d2h = material.lambda * (dc * dc + c * d2c);
-                    let (alpha, beta) = (material.mu - dh * j, d2h * j * j + dh * j);
-                    add_isotropic_tet_hessian(volume, g, &gt, material.mu, alpha, beta, hess, 12);
+                    add_isotropic_tet_hessian(volume, g, &gt, material.mu, alpha, beta, hess, 12)
                 }
             }
         }
@@ -142,10 +149,7 @@ impl ElasticTerm {
         mass: PressureMass,
     ) -> f64 {
         let h = self.displacement_gradient(e, z);
-        let Some(shear) = self
-            .material(e)
-            .shear_from_displacement_gradient(&h, hess.is_some() && mode == HessianMode::Projected)
-        else {
+        let Some(shear) = self.material(e).shear_from_displacement_gradient(&h, false) else {
             return f64::INFINITY;
         };
         let Some((gt, j)) =
@@ -180,24 +184,23 @@ impl ElasticTerm {
         if let Some(hess) = hess {
             hess.fill(0.0);
             let (dh, d2h) = (q * dc, q * d2c);
+            let mu = self.mu[e];
+            let (alpha, beta) = (mu - dh * j, d2h * j * j + dh * j);
             match mode {
-                HessianMode::Projected => {
-                    let tangent: Tangent = shear.tangent.expect("tangent requested")
-                        + volumetric_tangent(&gt, j, dh, d2h);
-                    add_tet_hessian(volume, g, &project_to_psd(&tangent), hess, 16);
-                }
+                // Only the displacement block is projected: the saddle point stays a saddle point.
+                HessianMode::Projected => add_projected_isotropic_tet_hessian(
+                    volume,
+                    g,
+                    &(crate::material::Mat3::identity() + h),
+                    &gt,
+                    mu,
+                    alpha,
+                    beta,
+                    hess,
+                    16,
+                ),
                 HessianMode::Exact => {
-                    let mu = self.mu[e];
-                    add_isotropic_tet_hessian(
-                        volume,
-                        g,
-                        &gt,
-                        mu,
-                        mu - dh * j,
-                        d2h * j * j + dh * j,
-                        hess,
-                        16,
-                    );
+                    add_isotropic_tet_hessian(volume, g, &gt, mu, alpha, beta, hess, 16)
                 }
             }
             for b in 0..4 {

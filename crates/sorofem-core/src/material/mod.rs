@@ -57,3 +57,105 @@ pub fn volumetric_tangent(g: &Mat3, j: f64, dh: f64, d2h: f64) -> Tangent {
     }
     t
 }
+
+/// The negative eigenpairs `(lambda_k, Q_k)` (`|Q_k| = 1`, Frobenius) of the isotropic tangent
+/// `A = mu I + alpha T + beta O` at F, with `T_(ij)(kl) = G_il G_kj`, `O_(ij)(kl) = G_ij G_kl`,
+/// `G = F^{-T}`: every Neo-Hookean tangent in this crate has this form.
+///
+/// With `F = U S V^T` and `d = 1/s`, A is block diagonal in the basis `u_i v_j^T` (Smith, de Goes
+/// and Kim, "Analytic eigensystems for isotropic distortion energies", 2019): for each pair
+/// `i < j` a twist mode `(u_i v_j^T - u_j v_i^T)/sqrt 2` with eigenvalue `mu - alpha d_i d_j` and
+/// a flip mode `(u_i v_j^T + u_j v_i^T)/sqrt 2` with `mu + alpha d_i d_j`; on the stretches
+/// `sum_i y_i u_i v_i^T` the 3x3 block `mu I + alpha diag(d^2) + beta d d^T`. So projecting A to
+/// positive semi-definite costs a 3x3 SVD for the (few) indefinite elements and nothing for the
+/// others, instead of a 9x9 eigendecomposition. Returns how many of `out` were written.
+pub fn isotropic_tangent_negative_modes(
+    f: &Mat3,
+    mu: f64,
+    alpha: f64,
+    beta: f64,
+    out: &mut [(f64, Mat3); 9],
+) -> usize {
+    // A cheap test on the singular values from the eigenvalues of F^T F first: most elements
+    // are definite. The margin keeps round-off in that closed form from hiding a negative mode.
+    let s2 = symmetric_eigenvalues(&(f.transpose() * f));
+    let scale = mu.abs() + alpha.abs() + beta.abs();
+    let margin = 1e-6 * scale;
+    if s2.iter().all(|&v| v > 0.0) {
+        let d: [f64; 3] = s2.map(|v| 1.0 / v.sqrt());
+        let pairs_definite = [(0, 1), (0, 2), (1, 2)]
+            .iter()
+            .all(|&(i, j)| mu - alpha.abs() * d[i] * d[j] > margin);
+        let block = stretch_block(mu, alpha, beta, &d);
+        if pairs_definite && block_definite(&block, margin) {
+            return 0;
+        }
+    }
+    let svd = f.svd(true, true);
+    let (u, v_t) = (svd.u.expect("U requested"), svd.v_t.expect("V requested"));
+    let v = v_t.transpose();
+    let d: [f64; 3] = std::array::from_fn(|i| 1.0 / svd.singular_values[i]);
+    let mut n = 0;
+    let outer = |a: usize, b: usize| u.column(a) * v.column(b).transpose();
+    for (i, j) in [(0, 1), (0, 2), (1, 2)] {
+        let coupling = alpha * d[i] * d[j];
+        for (lambda, sign) in [(mu - coupling, -1.0), (mu + coupling, 1.0)] {
+            if lambda < 0.0 {
+                out[n] = (
+                    lambda,
+                    (outer(i, j) + sign * outer(j, i)) * std::f64::consts::FRAC_1_SQRT_2,
+                );
+                n += 1;
+            }
+        }
+    }
+    let block = stretch_block(mu, alpha, beta, &d);
+    if block_definite(&block, 0.0) {
+        return n;
+    }
+    let eig = nalgebra::SymmetricEigen::new(block);
+    for k in 0..3 {
+        if eig.eigenvalues[k] < 0.0 {
+            let y = eig.eigenvectors.column(k);
+            out[n] = (
+                eig.eigenvalues[k],
+                outer(0, 0) * y[0] + outer(1, 1) * y[1] + outer(2, 2) * y[2],
+            );
+            n += 1;
+        }
+    }
+    n
+}
+
+/// `mu I + alpha diag(d^2) + beta d d^T`: the tangent on the stretch modes.
+fn stretch_block(mu: f64, alpha: f64, beta: f64, d: &[f64; 3]) -> Mat3 {
+    let dv = nalgebra::Vector3::from(*d);
+    Mat3::from_diagonal(&dv.component_mul(&dv)) * alpha
+        + dv * dv.transpose() * beta
+        + Mat3::identity() * mu
+}
+
+/// Whether a symmetric 3x3 matrix exceeds `margin` I (leading principal minors).
+fn block_definite(m: &Mat3, margin: f64) -> bool {
+    let shifted = m - Mat3::identity() * margin;
+    let minor2 = shifted[(0, 0)] * shifted[(1, 1)] - shifted[(0, 1)] * shifted[(1, 0)];
+    shifted[(0, 0)] > 0.0 && minor2 > 0.0 && shifted.determinant() > 0.0
+}
+
+/// Eigenvalues of a symmetric 3x3 matrix in closed form (trigonometric solution of the
+/// characteristic cubic), accurate to round-off relative to the matrix norm.
+pub fn symmetric_eigenvalues(c: &Mat3) -> [f64; 3] {
+    let off = c[(0, 1)].powi(2) + c[(0, 2)].powi(2) + c[(1, 2)].powi(2);
+    let q = c.trace() / 3.0;
+    let diag = (c[(0, 0)] - q).powi(2) + (c[(1, 1)] - q).powi(2) + (c[(2, 2)] - q).powi(2);
+    let p = ((diag + 2.0 * off) / 6.0).sqrt();
+    if p == 0.0 {
+        return [q; 3];
+    }
+    let b = (c - Mat3::identity() * q) / p;
+    let r = (0.5 * b.determinant()).clamp(-1.0, 1.0);
+    let phi = r.acos() / 3.0;
+    let largest = q + 2.0 * p * phi.cos();
+    let smallest = q + 2.0 * p * (phi + 2.0 * std::f64::consts::FRAC_PI_3).cos();
+    [largest, 3.0 * q - largest - smallest, smallest]
+}
