@@ -147,3 +147,50 @@ fn inverted_deformation_has_infinite_energy() {
     let f = Mat3::from_diagonal(&nalgebra::Vector3::new(-1.0, 1.0, 1.0));
     assert_eq!(material.energy_density(&f), f64::INFINITY);
 }
+
+/// The kernels' one-pass `pointwise` gives the energy and stress of `response` and `shear`, and
+/// its (F^{-T}, J, c, c', c'') rebuild their tangent in the isotropic form
+/// `mu I + alpha T + beta O` (the form the element Hessians use).
+#[test]
+fn pointwise_matches_response_and_shear() {
+    let mut rng = Rng::new(19);
+    for volumetric in [Volumetric::Log, Volumetric::Linear] {
+        let material = NeoHookean {
+            mu: 2.3e4,
+            lambda: 4.1e5,
+            volumetric,
+        };
+        for _ in 0..20 {
+            let f = random_f(&mut rng, 0.3);
+            let h = f - Mat3::identity();
+            let full = material.response(&f, true).unwrap();
+            let shear = material.shear(&f, false).unwrap();
+            let p = material.pointwise(&h, true).unwrap();
+            let q = material.pointwise(&h, false).unwrap();
+            let close = |a: f64, b: f64, scale: f64| (a - b).abs() <= 1e-12 * scale;
+            assert!(close(p.energy, full.energy, full.energy.abs()));
+            assert!(close(q.energy, shear.energy, shear.energy.abs()));
+            let s = full.stress.norm();
+            assert!((p.stress - full.stress).norm() <= 1e-12 * s);
+            assert!((q.stress - shear.stress).norm() <= 1e-12 * s);
+            let (c, dc, d2c) = p.measure;
+            let dh = material.lambda * c * dc;
+            let d2h = material.lambda * (dc * dc + c * d2c);
+            let (alpha, beta) = (material.mu - dh * p.j, d2h * p.j * p.j + dh * p.j);
+            let t = full.tangent.unwrap();
+            let g = p.gt;
+            for i in 0..3 {
+                for j in 0..3 {
+                    for k in 0..3 {
+                        for l in 0..3 {
+                            let isotropic = if (i, j) == (k, l) { material.mu } else { 0.0 }
+                                + alpha * g[(i, l)] * g[(k, j)]
+                                + beta * g[(i, j)] * g[(k, l)];
+                            assert!(close(isotropic, t[(3 * i + j, 3 * k + l)], t.norm()));
+                        }
+                    }
+                }
+            }
+        }
+    }
+}

@@ -94,10 +94,8 @@ impl ElasticTerm {
         mode: HessianMode,
     ) -> f64 {
         let h = self.displacement_gradient(e, z);
-        let Some(r) = self
-            .material(e)
-            .response_from_displacement_gradient(&h, false)
-        else {
+        let material = self.material(e);
+        let Some(r) = material.pointwise(&h, true) else {
             return f64::INFINITY;
         };
         let volume = self.mesh.volumes()[e];
@@ -108,14 +106,9 @@ impl ElasticTerm {
         }
         if let Some(hess) = hess {
             hess.fill(0.0);
-            let material = self.material(e);
             let f = crate::material::Mat3::identity() + h;
-            let Some((gt, j)) = crate::material::inverse_transpose(&f) else {
-                return f64::INFINITY;
-            };
-            let (c, dc, d2c) = material
-                .volumetric
-                .measure_near_one(crate::material::neo_hookean::j_minus_one(&h));
+            let (gt, j) = (r.gt, r.j);
+            let (c, dc, d2c) = r.measure;
             let dh = material.lambda * c * dc;
             let d2h = material.lambda * (dc * dc + c * d2c);
             let (alpha, beta) = (material.mu - dh * j, d2h * j * j + dh * j);
@@ -149,21 +142,15 @@ impl ElasticTerm {
         mass: PressureMass,
     ) -> f64 {
         let h = self.displacement_gradient(e, z);
-        let Some(shear) = self.material(e).shear_from_displacement_gradient(&h, false) else {
+        let Some(shear) = self.material(e).pointwise(&h, false) else {
             return f64::INFINITY;
         };
-        let Some((gt, j)) =
-            crate::material::inverse_transpose(&(crate::material::Mat3::identity() + h))
-        else {
-            return f64::INFINITY;
-        };
+        let (gt, j) = (shear.gt, shear.j);
         let volume = self.mesh.volumes()[e];
         let g = self.mesh.shape_gradients(e);
         let p = &z[12..16];
         let q = 0.25 * (p[0] + p[1] + p[2] + p[3]);
-        let (c, dc, d2c) = self
-            .volumetric
-            .measure_near_one(crate::material::neo_hookean::j_minus_one(&h));
+        let (c, dc, d2c) = shear.measure;
         let mut cp = [0.0; 4];
         for a in 0..4 {
             for b in 0..4 {

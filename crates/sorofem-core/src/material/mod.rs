@@ -31,12 +31,29 @@ pub fn project_to_psd(a: &Tangent) -> Tangent {
 }
 
 /// `F^{-T}` and `J = det F`; `None` when the element is inverted or flat (J <= 0).
+///
+/// From the cofactor matrix: its rows are cross products of the rows of F, `F^{-T} = cof F / J`
+/// and `J` is a row of F dotted with its cofactor row (one pass, no separate determinant).
 pub fn inverse_transpose(f: &Mat3) -> Option<(Mat3, f64)> {
-    let j = f.determinant();
+    let r = [
+        f.row(0).transpose(),
+        f.row(1).transpose(),
+        f.row(2).transpose(),
+    ];
+    let cof = [r[1].cross(&r[2]), r[2].cross(&r[0]), r[0].cross(&r[1])];
+    let j = r[0].dot(&cof[0]);
     if !(j > 0.0) {
         return None;
     }
-    f.try_inverse().map(|inv| (inv.transpose(), j))
+    let inv_j = 1.0 / j;
+    Some((
+        Mat3::from_rows(&[
+            (cof[0] * inv_j).transpose(),
+            (cof[1] * inv_j).transpose(),
+            (cof[2] * inv_j).transpose(),
+        ]),
+        j,
+    ))
 }
 
 /// The tangent of a volumetric energy density `h(J)`: with `G = F^{-T}`,

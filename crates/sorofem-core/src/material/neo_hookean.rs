@@ -53,7 +53,55 @@ pub struct Response {
     pub tangent: Option<Tangent>,
 }
 
+/// What an element kernel needs at one `H = F - I`, from one inverse and one logarithm.
+pub struct Pointwise {
+    /// `psi` (Pa), or `psi_mu` alone when the volumetric part was left out.
+    pub energy: f64,
+    /// First Piola-Kirchhoff stress of the same energy (Pa).
+    pub stress: Mat3,
+    /// `F^{-T}`.
+    pub gt: Mat3,
+    /// `J = det F`.
+    pub j: f64,
+    /// `(c(J), c'(J), c''(J))` of the volumetric measure.
+    pub measure: (f64, f64, f64),
+}
+
 impl NeoHookean {
+    /// Energy density and stress at `H = F - I` (with or without the volumetric part
+    /// `lambda/2 c(J)^2`), plus the quantities the isotropic tangent is built from. The same
+    /// values as [`NeoHookean::response_from_displacement_gradient`] and
+    /// [`NeoHookean::shear_from_displacement_gradient`], for about half their cost. `None` for
+    /// J <= 0.
+    pub fn pointwise(&self, h: &Mat3, with_volumetric: bool) -> Option<Pointwise> {
+        let (gt, j) = inverse_transpose(&(Mat3::identity() + h))?;
+        let jm1 = j_minus_one(h);
+        let log_j = jm1.ln_1p();
+        let mu = self.mu;
+        // psi_mu / mu = (tr H - (J - 1)) + |H|^2/2 + ((J - 1) - ln J): see shear_from_displacement_gradient.
+        let mut energy = mu * ((h.trace() - jm1) + 0.5 * h.norm_squared() + (jm1 - log_j));
+        let mut stress = mu * (h + gt * h.transpose());
+        let measure = match self.volumetric {
+            Volumetric::Log => {
+                let inv = 1.0 / (1.0 + jm1);
+                (log_j, inv, -inv * inv)
+            }
+            Volumetric::Linear => (jm1, 1.0, 0.0),
+        };
+        if with_volumetric {
+            let (c, dc, _) = measure;
+            energy += 0.5 * self.lambda * c * c;
+            stress += (self.lambda * c * dc * j) * gt;
+        }
+        Some(Pointwise {
+            energy,
+            stress,
+            gt,
+            j,
+            measure,
+        })
+    }
+
     /// Shear part `psi_mu = mu/2 (I1 - 3) - mu ln J`, its stress `mu (F - F^{-T})` and tangent
     /// `mu I + mu G_il G_kj` (G = F^{-T}). `None` for J <= 0.
     pub fn shear(&self, f: &Mat3, with_tangent: bool) -> Option<Response> {
