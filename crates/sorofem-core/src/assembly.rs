@@ -162,6 +162,16 @@ impl Assembler {
     /// Builds the pattern of the Hessian of `terms` restricted to the DOFs with `fixed[d] == false`.
     /// Later evaluations must pass terms with the same structure, in the same order.
     pub fn new(fixed: &[bool], terms: &[&dyn Term]) -> Self {
+        Self::new_with(fixed, terms, |_| ()).0
+    }
+
+    /// [`Assembler::new`], running `analyse` on the finished pattern (e.g. the symbolic
+    /// factorisation, single-threaded) at the same time as the element plans are built.
+    pub fn new_with<T: Send>(
+        fixed: &[bool],
+        terms: &[&dyn Term],
+        analyse: impl FnOnce(&LowerPattern) -> T + Send,
+    ) -> (Self, T) {
         let n_full = fixed.len();
         let mut free_of_full = vec![FIXED; n_full];
         let mut full_of_free = Vec::new();
@@ -191,19 +201,27 @@ impl Assembler {
             })
             .collect();
         let pattern = lower_pattern(n_free, terms, &local_free);
-        let level = bfs_levels(&pattern);
-        let plans = terms
-            .iter()
-            .zip(local_free)
-            .map(|(term, free)| TermPlan::new(*term, free, &pattern, &level))
-            .collect();
-        Assembler {
-            n_full,
-            free_of_full,
-            full_of_free,
-            pattern,
-            plans,
-        }
+        let (analysis, plans) = rayon::join(
+            || analyse(&pattern),
+            || {
+                let level = bfs_levels(&pattern);
+                terms
+                    .iter()
+                    .zip(local_free)
+                    .map(|(term, free)| TermPlan::new(*term, free, &pattern, &level))
+                    .collect()
+            },
+        );
+        (
+            Assembler {
+                n_full,
+                free_of_full,
+                full_of_free,
+                pattern,
+                plans,
+            },
+            analysis,
+        )
     }
 
     pub fn n_full(&self) -> usize {
@@ -343,19 +361,28 @@ fn lower_pattern(n_free: usize, terms: &[&dyn Term], local_free: &[Vec<u32>]) ->
             }
         }
     }
+    // A per-thread marker (`seen[r] == c` once row r is in column c) drops the repeats (each
+    // neighbour shows up in several elements) before the sort, which then sorts a third as much.
     let columns: Vec<Vec<u32>> = (0..n_free)
         .into_par_iter()
-        .map(|c| {
-            let mut rows = vec![c as u32];
-            for &(t, e) in &incident[count[c]..count[c + 1]] {
-                let s = terms[t as usize].stencil_size();
-                let element = &local_free[t as usize][e as usize * s..(e as usize + 1) * s];
-                rows.extend(element.iter().filter(|&&r| r != FIXED && r as usize > c));
-            }
-            rows.sort_unstable();
-            rows.dedup();
-            rows
-        })
+        .map_init(
+            || vec![u32::MAX; n_free],
+            |seen, c| {
+                let mut rows = vec![c as u32];
+                for &(t, e) in &incident[count[c]..count[c + 1]] {
+                    let s = terms[t as usize].stencil_size();
+                    let element = &local_free[t as usize][e as usize * s..(e as usize + 1) * s];
+                    for &r in element {
+                        if r != FIXED && r as usize > c && seen[r as usize] != c as u32 {
+                            seen[r as usize] = c as u32;
+                            rows.push(r);
+                        }
+                    }
+                }
+                rows.sort_unstable();
+                rows
+            },
+        )
         .collect();
     let mut col_ptr = Vec::with_capacity(n_free + 1);
     col_ptr.push(0);

@@ -104,7 +104,8 @@ pub struct SparseFactor {
 impl SparseFactor {
     /// Symbolic analysis with an approximate-minimum-degree ordering.
     pub fn analyse(pattern: &LowerPattern) -> Result<Self> {
-        Self::analyse_with_order(pattern, &amd_order(pattern)?)
+        let o = amd_order(pattern)?;
+        Self::analyse_with_order(pattern, &o)
     }
 
     /// Symbolic analysis with a given elimination order: `order[k]` is the unknown eliminated
@@ -123,39 +124,43 @@ impl SparseFactor {
                 message: "elimination order is not a permutation".into(),
             });
         }
-        // Entry (r, c) of A goes to (max, min) of (inverse[r], inverse[c]) in P A P^T; a counting
-        // sort by new column, then a sort of each column's rows, fixes every slot.
-        let new_entry = |k: usize, c: usize| {
-            let (a, b) = (inverse[pattern.row_idx[k]], inverse[c]);
-            (a.max(b), a.min(b))
-        };
-        let mut col_ptr = vec![0usize; n + 1];
+        // Entry (r, c) of A goes to (max, min) of (inverse[r], inverse[c]) in P A P^T. Two
+        // counting sorts place every entry: first by new row, then, visiting rows in increasing
+        // order, by new column, which leaves each column's rows sorted.
+        let nnz = pattern.nnz();
+        let mut by_row = vec![0usize; n + 1];
+        let mut new_entries = vec![(0usize, 0usize); nnz]; // (new row, new column) per entry
         for c in 0..n {
             for k in pattern.col_ptr[c]..pattern.col_ptr[c + 1] {
-                col_ptr[new_entry(k, c).1 + 1] += 1;
+                let (a, b) = (inverse[pattern.row_idx[k]], inverse[c]);
+                new_entries[k] = (a.max(b), a.min(b));
+                by_row[a.max(b) + 1] += 1;
             }
+        }
+        for r in 0..n {
+            by_row[r + 1] += by_row[r];
+        }
+        let mut next = by_row.clone();
+        let mut row_order = vec![0usize; nnz];
+        for (k, &(row, _)) in new_entries.iter().enumerate() {
+            row_order[next[row]] = k;
+            next[row] += 1;
+        }
+        let mut col_ptr = vec![0usize; n + 1];
+        for &(_, col) in &new_entries {
+            col_ptr[col + 1] += 1;
         }
         for c in 0..n {
             col_ptr[c + 1] += col_ptr[c];
         }
         let mut next = col_ptr.clone();
-        let mut entries = vec![(0usize, 0usize); pattern.nnz()]; // (new row, original entry)
-        for c in 0..n {
-            for k in pattern.col_ptr[c]..pattern.col_ptr[c + 1] {
-                let (row, col) = new_entry(k, c);
-                entries[next[col]] = (row, k);
-                next[col] += 1;
-            }
-        }
-        let mut slot = vec![0usize; pattern.nnz()];
-        let mut row_idx = vec![0usize; pattern.nnz()];
-        for c in 0..n {
-            let column = &mut entries[col_ptr[c]..col_ptr[c + 1]];
-            column.sort_unstable();
-            for (offset, &(row, k)) in column.iter().enumerate() {
-                row_idx[col_ptr[c] + offset] = row;
-                slot[k] = col_ptr[c] + offset;
-            }
+        let mut row_idx = vec![0usize; nnz];
+        let mut slot = vec![0usize; nnz];
+        for &k in &row_order {
+            let (row, col) = new_entries[k];
+            row_idx[next[col]] = row;
+            slot[k] = next[col];
+            next[col] += 1;
         }
         let permuted = LowerPattern {
             n,

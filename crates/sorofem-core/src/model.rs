@@ -147,10 +147,17 @@ impl Model {
         for &node in &fixed {
             fixed_dofs[3 * node..3 * node + 3].fill(true);
         }
-        let assembler = Assembler::new(&fixed_dofs, &[&elastic, &cable_term]);
-        let factor = match formulation {
-            Formulation::Standard => SparseFactor::analyse(assembler.pattern())?,
+        let (assembler, factor) = match formulation {
+            // The symbolic factorisation needs only the pattern: it runs beside the element plans.
+            Formulation::Standard => {
+                let (assembler, factor) =
+                    Assembler::new_with(&fixed_dofs, &[&elastic, &cable_term], |pattern| {
+                        SparseFactor::analyse(pattern)
+                    });
+                (assembler, factor?)
+            }
             Formulation::Mixed { mass } => {
+                let assembler = Assembler::new(&fixed_dofs, &[&elastic, &cable_term]);
                 let compliance = PressureCompliance {
                     elastic: &elastic,
                     mass,
@@ -159,7 +166,8 @@ impl Model {
                 let node_graph = Assembler::new(&vec![false; n], &[&compliance]);
                 let node_order = crate::linear::amd_order(node_graph.pattern())?;
                 let order = saddle_point_order(&assembler, &node_order, &fixed_set, n_displacement);
-                SparseFactor::analyse_with_order(assembler.pattern(), &order)?
+                let factor = SparseFactor::analyse_with_order(assembler.pattern(), &order)?;
+                (assembler, factor)
             }
         };
         Ok(Model {
