@@ -53,6 +53,8 @@ struct TermPlan {
     /// position of the stored entry `(max(r, c), min(r, c))` in the Hessian values, possibly
     /// flagged TWICE; FIXED when either DOF is eliminated. Empty for linear terms.
     positions: Vec<u32>,
+    /// Per element in `order`: all positions valid and unflagged (the fast path).
+    plain: Vec<bool>,
 }
 
 /// Energy (J), reduced gradient (free DOFs) and optionally the Hessian's lower-triangle values.
@@ -86,6 +88,14 @@ impl SharedSlice {
     #[inline(always)]
     unsafe fn add(&self, i: usize, value: f64) {
         assert!(i < self.len);
+        *self.ptr.add(i) += value;
+    }
+
+    /// # Safety
+    /// As [`SharedSlice::add`], and `i` must be in bounds.
+    #[inline(always)]
+    unsafe fn add_unchecked(&self, i: usize, value: f64) {
+        debug_assert!(i < self.len);
         *self.ptr.add(i) += value;
     }
 }
@@ -498,11 +508,21 @@ impl TermPlan {
                 });
             positions
         };
+        let plain = if positions.is_empty() {
+            vec![false; n_el]
+        } else {
+            let pairs = s * (s + 1) / 2;
+            positions
+                .chunks(pairs.max(1))
+                .map(|element| element.iter().all(|&p| p & TWICE == 0))
+                .collect()
+        };
         TermPlan {
             order,
             chunks,
             local_free,
             positions,
+            plain,
         }
     }
 
@@ -548,7 +568,18 @@ impl TermPlan {
                         }
                     }
                 }
-                if want_hess {
+                if want_hess && self.plain[k] {
+                    // No eliminated DOF, no repeated DOF: every pair lands once, unflagged.
+                    let positions = &self.positions[k * pairs..(k + 1) * pairs];
+                    let mut p = 0;
+                    for a in 0..s {
+                        for &h in &hess[a * s..a * s + a + 1] {
+                            // SAFETY: as for the gradient; positions < nnz by construction.
+                            unsafe { values.add_unchecked(positions[p] as usize, h) };
+                            p += 1;
+                        }
+                    }
+                } else if want_hess {
                     let positions = &self.positions[k * pairs..(k + 1) * pairs];
                     let mut p = 0;
                     for a in 0..s {
