@@ -11,10 +11,10 @@
 //! the odd ones. Each stored entry therefore receives its contributions in an order fixed by the
 //! mesh and the chunking alone (not by the thread count or scheduling): results are deterministic.
 //!
-//! Compared with writing every element's values to a buffer and gathering them per entry, this
-//! moves a tenth of the memory (the per-element buffer of a 10k-tet mesh is about 10 MB, beyond
-//! the caches, and a Newton iteration refills it right after the factorisation has evicted
-//! everything).
+//! This replaced writing every element's values to a buffer and gathering them per entry: that
+//! buffer (about 11 MB for the 9k-tet hammerbot, beyond the caches) was refilled right after
+//! each factorisation had evicted everything; without it a hammerbot Newton iteration's
+//! assembly went from 6.7 to 4.0 ms.
 //!
 //! DOFs are "full" (all `3 n` displacements plus any extra unknowns such as pressures) or "free"
 //! (the full DOFs minus the fixed ones, in increasing order); the Newton unknowns are the free ones.
