@@ -262,7 +262,8 @@ impl Assembler {
         self.evaluate(terms, z, false, None).energy
     }
 
-    /// Energy, reduced gradient and (when `hessian` is `Some(mode)`) the Hessian values in the
+    /// Energy, reduced gradient (empty unless `gradient`) and (when `hessian` is `Some(mode)`)
+    /// the Hessian values in the
     /// order of [`Assembler::pattern`]. Deterministic: every sum runs in an order fixed when the
     /// assembler was built.
     pub fn evaluate(
@@ -276,7 +277,7 @@ impl Assembler {
         assert_eq!(terms.len(), self.plans.len(), "terms of the assembler");
         let mut out = Evaluation {
             energy: 0.0,
-            gradient: if gradient || hessian.is_some() {
+            gradient: if gradient {
                 vec![0.0; self.n_free()]
             } else {
                 Vec::new()
