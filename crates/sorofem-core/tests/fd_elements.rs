@@ -134,18 +134,19 @@ fn gravity_element_is_the_lumped_weight() {
     assert!((total_y - (-9.81 * 1000.0 * 0.2 * 0.1 * 0.1)).abs() < 1e-12);
 }
 
-#[test]
-fn assembled_gradient_and_hessian_with_fixed_dofs() {
-    let mesh = small_mesh();
+/// Both formulations of the elastic term on `mesh`, with the DOFs of the x = 0 face fixed:
+/// `(formulation, term, fixed, number of extra unknowns)`.
+fn clamped_at_x0(mesh: &Arc<TetMesh>) -> Vec<(Formulation, ElasticTerm, Vec<bool>, usize)> {
     let n = mesh.n_nodes();
-    for formulation in [
+    [
         Formulation::Standard,
         Formulation::Mixed {
             pressure_offset: 3 * n,
             mass: PressureMass::Consistent,
         },
-    ] {
-        let term = elastic(&mesh, Volumetric::Log, formulation);
+    ]
+    .into_iter()
+    .map(|formulation| {
         let extra = if formulation == Formulation::Standard {
             0
         } else {
@@ -155,6 +156,16 @@ fn assembled_gradient_and_hessian_with_fixed_dofs() {
         for node in mesh.nodes_in_box([-1e-9, -1.0, -1.0], [1e-9, 1.0, 1.0]) {
             fixed[3 * node..3 * node + 3].fill(true);
         }
+        let term = elastic(mesh, Volumetric::Log, formulation);
+        (formulation, term, fixed, extra)
+    })
+    .collect()
+}
+
+#[test]
+fn assembled_gradient_and_hessian_with_fixed_dofs() {
+    let mesh = small_mesh();
+    for (_, term, fixed, extra) in clamped_at_x0(&mesh) {
         let assembler = Assembler::new(&fixed, &[&term]);
         let z0 = deformed_state(&mesh, extra, 5);
         let eval = assembler.evaluate(&[&term], &z0, true, Some(HessianMode::Exact));
@@ -241,23 +252,7 @@ fn parallel_assembly_matches_a_serial_dense_sum() {
         transition: 0.05,
         damping: 0.0,
     }]);
-    for formulation in [
-        Formulation::Standard,
-        Formulation::Mixed {
-            pressure_offset: 3 * n,
-            mass: PressureMass::Consistent,
-        },
-    ] {
-        let term = elastic(&mesh, Volumetric::Log, formulation);
-        let extra = if formulation == Formulation::Standard {
-            0
-        } else {
-            n
-        };
-        let mut fixed = vec![false; 3 * n + extra];
-        for node in mesh.nodes_in_box([-1e-9, -1.0, -1.0], [1e-9, 1.0, 1.0]) {
-            fixed[3 * node..3 * node + 3].fill(true);
-        }
+    for (formulation, term, fixed, extra) in clamped_at_x0(&mesh) {
         let terms: [&dyn Term; 2] = [&term, &cable];
         let assembler = Assembler::new(&fixed, &terms);
         // A stretch plus noise far below the cell size (0.0625 m): no element inverts.
@@ -270,6 +265,7 @@ fn parallel_assembly_matches_a_serial_dense_sum() {
         for mode in [HessianMode::Exact, HessianMode::Projected] {
             let eval = assembler.evaluate(&terms, &z, true, Some(mode));
             let again = assembler.evaluate(&terms, &z, true, Some(mode));
+            assert_eq!(eval.hessian, again.hessian, "assembly is not deterministic");
             let nf = assembler.n_free();
             let mut dense = vec![0.0; nf * nf];
             let mut gradient = vec![0.0; nf];
