@@ -104,8 +104,7 @@ pub struct SparseFactor {
 impl SparseFactor {
     /// Symbolic analysis with an approximate-minimum-degree ordering.
     pub fn analyse(pattern: &LowerPattern) -> Result<Self> {
-        let o = amd_order(pattern)?;
-        Self::analyse_with_order(pattern, &o)
+        Self::analyse_with_order(pattern, &amd_order(pattern)?)
     }
 
     /// Symbolic analysis with a given elimination order: `order[k]` is the unknown eliminated

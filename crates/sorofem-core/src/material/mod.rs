@@ -35,13 +35,17 @@ pub fn project_to_psd(a: &Tangent) -> Tangent {
 /// From the cofactor matrix: its rows are cross products of the rows of F, `F^{-T} = cof F / J`
 /// and `J` is a row of F dotted with its cofactor row (one pass, no separate determinant).
 pub fn inverse_transpose(f: &Mat3) -> Option<(Mat3, f64)> {
-    let r = [
+    let rows = [
         f.row(0).transpose(),
         f.row(1).transpose(),
         f.row(2).transpose(),
     ];
-    let cof = [r[1].cross(&r[2]), r[2].cross(&r[0]), r[0].cross(&r[1])];
-    let j = r[0].dot(&cof[0]);
+    let cof = [
+        rows[1].cross(&rows[2]),
+        rows[2].cross(&rows[0]),
+        rows[0].cross(&rows[1]),
+    ];
+    let j = rows[0].dot(&cof[0]);
     if !(j > 0.0) {
         return None;
     }
