@@ -183,34 +183,9 @@ impl Assembler {
         analyse: impl FnOnce(&LowerPattern) -> T + Send,
     ) -> (Self, T) {
         let n_full = fixed.len();
-        let mut free_of_full = vec![FIXED; n_full];
-        let mut full_of_free = Vec::new();
-        for d in 0..n_full {
-            if !fixed[d] {
-                free_of_full[d] = full_of_free.len() as u32;
-                full_of_free.push(d);
-            }
-        }
-        let n_free = full_of_free.len();
-        // Free index of every local DOF, in element order.
-        let local_free: Vec<Vec<u32>> = terms
-            .iter()
-            .map(|term| {
-                let s = term.stencil_size();
-                let mut out = vec![FIXED; term.n_elements() * s];
-                out.par_chunks_mut(s.max(1)).enumerate().for_each_init(
-                    || vec![0usize; s],
-                    |dofs, (e, chunk)| {
-                        term.element_dofs(e, dofs);
-                        for (slot, &d) in chunk.iter_mut().zip(dofs.iter()) {
-                            *slot = free_of_full[d];
-                        }
-                    },
-                );
-                out
-            })
-            .collect();
-        let pattern = lower_pattern(n_free, terms, &local_free);
+        let (free_of_full, full_of_free) = free_numbering(fixed);
+        let local_free = local_free_indices(terms, &free_of_full);
+        let pattern = lower_pattern(full_of_free.len(), terms, &local_free);
         let (analysis, plans) = rayon::join(
             || analyse(&pattern),
             || {
@@ -334,6 +309,51 @@ impl Assembler {
             .map(|g| -g)
             .collect()
     }
+}
+
+/// The Hessian pattern of `terms` over the DOFs with `fixed[d] == false`, as
+/// [`Assembler::pattern`] would give it, without the element plans.
+pub fn pattern_of(fixed: &[bool], terms: &[&dyn Term]) -> LowerPattern {
+    let (free_of_full, full_of_free) = free_numbering(fixed);
+    lower_pattern(
+        full_of_free.len(),
+        terms,
+        &local_free_indices(terms, &free_of_full),
+    )
+}
+
+/// Free index of every full DOF (FIXED when fixed) and full index of every free DOF.
+fn free_numbering(fixed: &[bool]) -> (Vec<u32>, Vec<usize>) {
+    let mut free_of_full = vec![FIXED; fixed.len()];
+    let mut full_of_free = Vec::new();
+    for (d, &is_fixed) in fixed.iter().enumerate() {
+        if !is_fixed {
+            free_of_full[d] = full_of_free.len() as u32;
+            full_of_free.push(d);
+        }
+    }
+    (free_of_full, full_of_free)
+}
+
+/// Per term, the free index of every local DOF, in element order (FIXED when eliminated).
+fn local_free_indices(terms: &[&dyn Term], free_of_full: &[u32]) -> Vec<Vec<u32>> {
+    terms
+        .iter()
+        .map(|term| {
+            let s = term.stencil_size();
+            let mut out = vec![FIXED; term.n_elements() * s];
+            out.par_chunks_mut(s.max(1)).enumerate().for_each_init(
+                || vec![0usize; s],
+                |dofs, (e, chunk)| {
+                    term.element_dofs(e, dofs);
+                    for (slot, &d) in chunk.iter_mut().zip(dofs.iter()) {
+                        *slot = free_of_full[d];
+                    }
+                },
+            );
+            out
+        })
+        .collect()
 }
 
 /// The lower triangle of the union of the element couplings of the nonlinear terms, plus every

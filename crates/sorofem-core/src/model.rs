@@ -157,17 +157,29 @@ impl Model {
                 (assembler, factor?)
             }
             Formulation::Mixed { mass } => {
-                let assembler = Assembler::new(&fixed_dofs, &[&elastic, &cable_term]);
                 let compliance = PressureCompliance {
                     elastic: &elastic,
                     mass,
                 };
-                // The pressure unknowns live on the nodes, so this pattern is the node graph.
-                let node_graph = Assembler::new(&vec![false; n], &[&compliance]);
-                let node_order = crate::linear::amd_order(node_graph.pattern())?;
-                let order = saddle_point_order(&assembler, &node_order, &fixed_set, n_displacement);
-                let factor = SparseFactor::analyse_with_order(assembler.pattern(), &order)?;
-                (assembler, factor)
+                let mut free_of_full = vec![None; n_full];
+                for (index, d) in (0..n_full).filter(|&d| !fixed_dofs[d]).enumerate() {
+                    free_of_full[d] = Some(index);
+                }
+                let (assembler, factor) =
+                    Assembler::new_with(&fixed_dofs, &[&elastic, &cable_term], |pattern| {
+                        // The pressure unknowns live on the nodes, so this pattern is the node graph.
+                        let node_graph =
+                            crate::assembly::pattern_of(&vec![false; n], &[&compliance]);
+                        let node_order = crate::linear::amd_order(&node_graph)?;
+                        let order = saddle_point_order(
+                            &free_of_full,
+                            &node_order,
+                            &fixed_set,
+                            n_displacement,
+                        );
+                        SparseFactor::analyse_with_order(pattern, &order)
+                    });
+                (assembler, factor?)
             }
         };
         Ok(Model {
@@ -807,25 +819,25 @@ impl Model {
 /// to no displacement of their own) last. Every pressure pivot then carries `G K^{-1} G^T` and
 /// not just the compliance `C = M_p / lambda`, which vanishes as nu -> 0.5.
 fn saddle_point_order(
-    assembler: &Assembler,
+    free_of_full: &[Option<usize>],
     node_order: &[usize],
     fixed: &[bool],
     pressure_offset: usize,
 ) -> Vec<usize> {
     let n = fixed.len();
-    let mut order = Vec::with_capacity(assembler.n_free());
+    let mut order = Vec::with_capacity(free_of_full.len());
     // Free cable nodes carry no pressure: eliminate them first, like any displacement.
-    order.extend((3 * n..pressure_offset).filter_map(|d| assembler.free_of_full(d)));
+    order.extend((3 * n..pressure_offset).filter_map(|d| free_of_full[d]));
     for &node in node_order {
         for d in 3 * node..3 * node + 3 {
-            order.extend(assembler.free_of_full(d));
+            order.extend(free_of_full[d]);
         }
         if !fixed[node] {
-            order.extend(assembler.free_of_full(pressure_offset + node));
+            order.extend(free_of_full[pressure_offset + node]);
         }
     }
     for node in (0..n).filter(|&i| fixed[i]) {
-        order.extend(assembler.free_of_full(pressure_offset + node));
+        order.extend(free_of_full[pressure_offset + node]);
     }
     order
 }
