@@ -93,9 +93,9 @@ pub trait NewtonProblem {
     fn slope(&self, g: &[f64], d: &[f64]) -> f64 {
         dot(g, d)
     }
-    /// Non-monotone line search: a step is also accepted when its merit is at most this factor
-    /// times the largest merit of the last five iterates (0: plain Armijo backtracking). Used
-    /// with residual merits, whose Armijo test stalls far from the solution.
+    /// A step is also accepted when its merit is at most this factor times the largest merit of
+    /// the last five iterates (0: no such test). Used with residual merits (non-negative), whose
+    /// Armijo test stalls far from the solution.
     fn nonmonotone_factor(&self) -> f64 {
         0.0
     }
@@ -209,7 +209,11 @@ fn newton_step(
         };
         let t0 = Instant::now();
         let slope = problem.slope(&g, &d);
-        // The largest merit of the last five iterates, for the non-monotone acceptance test.
+        // The largest merit of the last five iterates (and of this one), for the non-monotone
+        // Armijo test of Grippo, Lampariello and Lucidi (1986): a trial must fall below it by the
+        // Armijo decrease, not below the current merit. Large-rotation problems need this: with
+        // the plain Armijo test the hammerbot takes 17 Newton iterations instead of 14, the
+        // 0.4 m cantilever at 32x8x8 cells 16 instead of 12, the 1 m one at 8x2x2 16 instead of 14.
         let window_max = report
             .energy_history
             .iter()
@@ -228,8 +232,9 @@ fn newton_step(
             problem.step(&mut trial, &d, t);
             let (e_trial, g_trial) = problem.merit_and_gradient(&mut trial);
             if e_trial.is_finite() {
-                if e_trial <= energy + 1e-4 * t * slope
-                    || e_trial <= problem.nonmonotone_factor() * window_max
+                let factor = problem.nonmonotone_factor();
+                if e_trial <= window_max + 1e-4 * t * slope
+                    || (factor > 0.0 && e_trial <= factor * window_max)
                 {
                     accepted = true;
                 } else if (e_trial - energy).abs() <= 1e-11 * energy.abs().max(f64::MIN_POSITIVE) {
