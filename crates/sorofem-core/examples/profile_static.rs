@@ -60,6 +60,12 @@ fn main() {
     } else {
         Formulation::Standard
     };
+    // PROFILE_BUILDS=N builds the model N extra times first (for profiling the build).
+    for _ in 0..env("PROFILE_BUILDS", 0.0) as usize {
+        let t = Instant::now();
+        Model::try_new(mesh.clone(), &fixed, formulation.clone(), Volumetric::Log).unwrap();
+        println!("model build {:.4} s", t.elapsed().as_secs_f64());
+    }
     let t = Instant::now();
     let mut model = Model::try_new(mesh.clone(), &fixed, formulation, Volumetric::Log).unwrap();
     println!(
