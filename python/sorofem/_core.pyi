@@ -17,6 +17,7 @@ class _Timings(TypedDict):
     factorization: float
     solve: float
     line_search: float
+    failed_factorization: float  # the part of `factorization` spent in failed ones
     total: float
 
 class _Report(TypedDict):
@@ -27,6 +28,8 @@ class _Report(TypedDict):
     load_steps: int  # accepted load steps
     cutbacks: int
     projected_steps: int
+    factorizations: int  # numeric factorisations, failed ones included
+    failed_factorizations: int  # not positive definite, or no descent direction
     residual_norm: float  # final absolute residual, N
     reference_norm: float  # N
     message: str

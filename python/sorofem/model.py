@@ -967,8 +967,14 @@ class SolveReport:
         How many times a load step failed and was halved.
     projected_steps
         Newton iterations that used the projected (positive semi-definite) Hessian.
+    factorizations
+        Numeric factorisations of the Hessian (one per iteration, plus one for every exact
+        Hessian that turned out indefinite).
+    failed_factorizations
+        Those of them that gave no usable direction (matrix not positive definite).
     timings
-        Seconds per phase: ``assembly``, ``factorization``, ``solve``, ``line_search``, ``total``.
+        Seconds per phase: ``assembly``, ``factorization`` (of which ``failed_factorization``
+        in the failed ones), ``solve``, ``line_search``, ``total``.
     absolute_residual_norm
         Final residual (gradient) norm, N.
     reference_norm
@@ -984,6 +990,8 @@ class SolveReport:
     load_steps: int = 0
     cutbacks: int = 0
     projected_steps: int = 0
+    factorizations: int = 0
+    failed_factorizations: int = 0
     step_lengths: list[float] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
     absolute_residual_norm: float = math.nan
@@ -1001,6 +1009,8 @@ class SolveReport:
             load_steps=int(data.get("load_steps", 0)),
             cutbacks=int(data.get("cutbacks", 0)),
             projected_steps=int(data.get("projected_steps", 0)),
+            factorizations=int(data.get("factorizations", 0)),
+            failed_factorizations=int(data.get("failed_factorizations", 0)),
             step_lengths=[float(t) for t in data.get("step_lengths", [])],
             timings={str(k): float(v) for k, v in dict(data.get("timings", {})).items()},
             # The extension's "residual_norm" is absolute; ours (a property) is relative.

@@ -1076,8 +1076,12 @@ impl NewtonProblem for System<'_> {
             Formulation::Standard => self.model.factor.factor_llt(pattern, &eval.hessian)?,
             Formulation::Mixed { .. } => self.model.factor.factor_ldlt(pattern, &eval.hessian)?,
         };
-        timings.factorization += t0.elapsed().as_secs_f64();
+        let seconds = t0.elapsed().as_secs_f64();
+        timings.factorization += seconds;
+        timings.factorizations += 1;
         if !ok {
+            timings.failed_factorization += seconds;
+            timings.failed_factorizations += 1;
             return Ok(None);
         }
         let t0 = Instant::now();
@@ -1091,16 +1095,19 @@ impl NewtonProblem for System<'_> {
         }
         self.model.factor.solve_in_place(&mut d);
         timings.solve += t0.elapsed().as_secs_f64();
-        if self.is_mixed() {
-            if !d.iter().all(|v| v.is_finite()) {
-                return Ok(None);
-            }
-            // No inertia test here: the condensed curvature du^T A du + dp^T C dp cancels
-            // catastrophically when the pressure (and so K_geo(p)) is large.
-            return Ok(Some(d));
+        // No inertia test for the mixed formulation: the condensed curvature
+        // du^T A du + dp^T C dp cancels catastrophically when the pressure (and so K_geo(p)) is
+        // large.
+        let usable = if self.is_mixed() {
+            d.iter().all(|v| v.is_finite())
+        } else {
+            d.iter().zip(g).map(|(a, b)| a * b).sum::<f64>() < 0.0
+        };
+        if !usable {
+            timings.failed_factorization += seconds;
+            timings.failed_factorizations += 1;
         }
-        let slope: f64 = d.iter().zip(g).map(|(a, b)| a * b).sum();
-        Ok((slope < 0.0).then_some(d))
+        Ok(usable.then_some(d))
     }
 
     fn step(&self, z: &mut [f64], d: &[f64], t: f64) {

@@ -46,6 +46,11 @@ pub fn report_to_dict<'py>(py: Python<'py>, report: &SolveReport) -> PyResult<Bo
     d.set_item("load_steps", report.load_steps)?;
     d.set_item("cutbacks", report.cutbacks)?;
     d.set_item("projected_steps", report.projected_steps)?;
+    d.set_item("factorizations", report.timings.factorizations)?;
+    d.set_item(
+        "failed_factorizations",
+        report.timings.failed_factorizations,
+    )?;
     d.set_item("residual_norm", report.residual_norm)?;
     d.set_item("reference_norm", report.reference_norm)?;
     d.set_item("message", report.message.clone())?;
@@ -54,6 +59,7 @@ pub fn report_to_dict<'py>(py: Python<'py>, report: &SolveReport) -> PyResult<Bo
     t.set_item("factorization", report.timings.factorization)?;
     t.set_item("solve", report.timings.solve)?;
     t.set_item("line_search", report.timings.line_search)?;
+    t.set_item("failed_factorization", report.timings.failed_factorization)?;
     t.set_item("total", report.timings.total)?;
     d.set_item("timings", t)?;
     Ok(d)
