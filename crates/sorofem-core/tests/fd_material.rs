@@ -194,3 +194,62 @@ fn pointwise_matches_response_and_shear() {
         }
     }
 }
+
+/// The closed-form SVD behind the Hessian projection: U and V rotations, F = U S V^T to
+/// round-off, on random states and on states with double and nearly double singular values
+/// (where it must either fall back or stay exact).
+#[test]
+fn rotation_svd_reconstructs_f() {
+    use nalgebra::Rotation3;
+    use sorofem_core::material::{rotation_svd, symmetric_eigenvalues};
+    let mut rng = Rng::new(11);
+    let mut cases: Vec<Mat3> = (0..400)
+        .map(|k| random_f(&mut rng, if k % 2 == 0 { 0.3 } else { 0.9 }))
+        .filter(|f| f.determinant() > 0.0)
+        .collect();
+    for (k, stretch) in [
+        [1.0, 1.0, 1.0],
+        [2.0, 1.0, 1.0],
+        [1.0, 1.0, 0.5],
+        [1.3, 1.3 + 1e-9, 0.7],
+        [1.0 + 1e-13, 1.0, 1.0 - 1e-13],
+        [3.0, 1.0, 0.02],
+        [1.0, 0.5, 0.5 - 1e-7],
+    ]
+    .iter()
+    .enumerate()
+    {
+        let u = Rotation3::from_euler_angles(0.4 * k as f64, -1.2, 0.3);
+        let v = Rotation3::from_euler_angles(1.1, 0.5 * k as f64, -0.8);
+        cases.push(u.matrix() * Mat3::from_diagonal(&(*stretch).into()) * v.matrix().transpose());
+    }
+    let mut closed_form = 0;
+    for f in &cases {
+        let Some((u, s, v)) = rotation_svd(f, &symmetric_eigenvalues(&(f.transpose() * f))) else {
+            continue;
+        };
+        closed_form += 1;
+        let scale = f.norm();
+        for (name, q) in [("U", &u), ("V", &v)] {
+            assert!(
+                (q.transpose() * q - Mat3::identity()).norm() < 1e-12,
+                "{name} not orthogonal: {f}"
+            );
+            assert!(
+                (q.determinant() - 1.0).abs() < 1e-12,
+                "{name} not a rotation: {f}"
+            );
+        }
+        assert!(s.iter().all(|&x| x > 0.0), "{s:?}");
+        let rebuilt = u * Mat3::from_diagonal(&s.into()) * v.transpose();
+        assert!(
+            (rebuilt - f).norm() < 1e-12 * scale,
+            "F = {f}, rebuilt {rebuilt}"
+        );
+    }
+    assert!(
+        closed_form >= cases.len() - 2,
+        "closed form used on {closed_form} of {}",
+        cases.len()
+    );
+}
