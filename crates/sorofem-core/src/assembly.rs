@@ -58,6 +58,7 @@ struct TermPlan {
 }
 
 /// Energy (J), reduced gradient (free DOFs) and optionally the Hessian's lower-triangle values.
+#[derive(Default)]
 pub struct Evaluation {
     pub energy: f64,
     pub gradient: Vec<f64>,
@@ -238,9 +239,8 @@ impl Assembler {
     }
 
     /// Energy, reduced gradient (empty unless `gradient`) and (when `hessian` is `Some(mode)`)
-    /// the Hessian values in the
-    /// order of [`Assembler::pattern`]. Deterministic: every sum runs in an order fixed when the
-    /// assembler was built.
+    /// the Hessian values in the order of [`Assembler::pattern`]. Deterministic: every sum runs
+    /// in an order fixed when the assembler was built.
     pub fn evaluate(
         &self,
         terms: &[&dyn Term],
@@ -248,34 +248,47 @@ impl Assembler {
         gradient: bool,
         hessian: Option<HessianMode>,
     ) -> Evaluation {
+        let mut out = Evaluation::default();
+        self.evaluate_into(terms, z, gradient, hessian, &mut out);
+        out
+    }
+
+    /// [`Assembler::evaluate`] into `out`, reusing its arrays: a Newton iteration's Hessian
+    /// values take megabytes, which need not be allocated (and page-faulted in) afresh.
+    pub fn evaluate_into(
+        &self,
+        terms: &[&dyn Term],
+        z: &[f64],
+        gradient: bool,
+        hessian: Option<HessianMode>,
+        out: &mut Evaluation,
+    ) {
         assert_eq!(z.len(), self.n_full, "full DOF vector length");
         assert_eq!(terms.len(), self.plans.len(), "terms of the assembler");
-        let mut out = Evaluation {
-            energy: 0.0,
-            gradient: if gradient {
-                vec![0.0; self.n_free()]
-            } else {
-                Vec::new()
-            },
-            hessian: if hessian.is_some() {
-                vec![0.0; self.pattern.nnz()]
-            } else {
-                Vec::new()
-            },
+        let zeroed = |values: &mut Vec<f64>, len: usize| {
+            values.clear();
+            values.resize(len, 0.0);
         };
+        out.energy = 0.0;
+        zeroed(&mut out.gradient, if gradient { self.n_free() } else { 0 });
+        let nnz = if hessian.is_some() {
+            self.pattern.nnz()
+        } else {
+            0
+        };
+        zeroed(&mut out.hessian, nnz);
         for (plan, term) in self.plans.iter().zip(terms) {
             debug_assert_eq!(
                 plan.order.len(),
                 term.n_elements(),
                 "term structure changed"
             );
-            out.energy += plan.add_term(*term, z, &mut out, hessian);
+            out.energy += plan.add_term(*term, z, out, hessian);
             if !out.energy.is_finite() {
                 out.energy = f64::INFINITY;
-                return out;
+                return;
             }
         }
-        out
     }
 
     /// Gradient of `terms` with respect to every full DOF, fixed ones included (N): the internal

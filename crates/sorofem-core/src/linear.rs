@@ -99,6 +99,9 @@ pub struct SparseFactor {
     /// Slot in `permuted` of each stored entry of the caller's pattern.
     slot: Vec<usize>,
     permuted_values: Vec<f64>,
+    /// The numeric factorisation's workspace, kept: allocating and freeing its few MB at every
+    /// factorisation cost page faults each time.
+    scratch: Option<MemBuffer>,
 }
 
 impl SparseFactor {
@@ -183,6 +186,7 @@ impl SparseFactor {
             values: vec![0.0; symbolic.len_val()],
             symbolic,
             stored: Stored::None,
+            scratch: None,
             order: order.to_vec(),
             permuted_values: vec![0.0; permuted.nnz()],
             permuted,
@@ -229,14 +233,14 @@ impl SparseFactor {
         let req = self
             .symbolic
             .factorize_numeric_llt_scratch::<f64>(par, Default::default());
-        let mut mem = MemBuffer::try_new(req).map_err(|_| oom())?;
+        let mem = scratch_of(&mut self.scratch, req)?;
         let result = self.symbolic.factorize_numeric_llt::<f64>(
             &mut self.values,
             mat,
             Side::Lower,
             LltRegularization::default(),
             par,
-            MemStack::new(&mut mem),
+            MemStack::new(mem),
             Default::default(),
         );
         match result {
@@ -265,14 +269,14 @@ impl SparseFactor {
         let req = self
             .symbolic
             .factorize_numeric_ldlt_scratch::<f64>(par, Default::default());
-        let mut mem = MemBuffer::try_new(req).map_err(|_| oom())?;
+        let mem = scratch_of(&mut self.scratch, req)?;
         let result = self.symbolic.factorize_numeric_ldlt::<f64>(
             &mut self.values,
             mat,
             Side::Lower,
             LdltRegularization::default(),
             par,
-            MemStack::new(&mut mem),
+            MemStack::new(mem),
             Default::default(),
         );
         self.stored = if result.is_ok() {
@@ -331,6 +335,17 @@ pub fn amd_order(pattern: &LowerPattern) -> Result<Vec<usize>> {
         message: format!("AMD ordering failed: {e:?}"),
     })?;
     Ok(order)
+}
+
+/// `kept`, grown to at least `req` if needed.
+fn scratch_of(
+    kept: &mut Option<MemBuffer>,
+    req: faer::dyn_stack::StackReq,
+) -> Result<&mut MemBuffer> {
+    if kept.as_ref().is_none_or(|mem| mem.len() < req.size_bytes()) {
+        *kept = Some(MemBuffer::try_new(req).map_err(|_| oom())?);
+    }
+    Ok(kept.as_mut().expect("allocated above"))
 }
 
 fn oom() -> Error {

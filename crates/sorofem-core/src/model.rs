@@ -67,6 +67,9 @@ pub struct Model {
     pub(crate) density: Vec<f64>,
     pub(crate) assembler: Assembler,
     pub(crate) factor: SparseFactor,
+    /// The Newton iterations' Hessian values, kept between assemblies (see
+    /// [`crate::assembly::Assembler::evaluate_into`]).
+    hessian_scratch: crate::assembly::Evaluation,
     /// Weight (Pa/m) of the volume-constraint residual rows (m^3) in the mixed residual norm,
     /// so that they are measured in N like the force rows: `mean(mu) / mean edge length`.
     pub(crate) pressure_weight: f64,
@@ -193,6 +196,7 @@ impl Model {
             density: vec![0.0; n_tets],
             assembler,
             factor,
+            hessian_scratch: Default::default(),
             pressure_weight: 1.0,
             last_extra: None,
             material_set: false,
@@ -1062,10 +1066,10 @@ impl NewtonProblem for System<'_> {
             HessianMode::Exact
         };
         let t0 = Instant::now();
-        let mut eval = self
-            .model
+        let mut eval = std::mem::take(&mut self.model.hessian_scratch);
+        self.model
             .assembler
-            .evaluate(&self.model.terms(), z, false, Some(mode));
+            .evaluate_into(&self.model.terms(), z, false, Some(mode), &mut eval);
         if let Some(step) = &self.step {
             step.add_hessian(&mut eval.hessian);
         }
@@ -1073,9 +1077,11 @@ impl NewtonProblem for System<'_> {
         let pattern = self.model.assembler.pattern();
         let t0 = Instant::now();
         let ok = match self.model.formulation {
-            Formulation::Standard => self.model.factor.factor_llt(pattern, &eval.hessian)?,
-            Formulation::Mixed { .. } => self.model.factor.factor_ldlt(pattern, &eval.hessian)?,
+            Formulation::Standard => self.model.factor.factor_llt(pattern, &eval.hessian),
+            Formulation::Mixed { .. } => self.model.factor.factor_ldlt(pattern, &eval.hessian),
         };
+        self.model.hessian_scratch = eval;
+        let ok = ok?;
         let seconds = t0.elapsed().as_secs_f64();
         timings.factorization += seconds;
         timings.factorizations += 1;

@@ -13,7 +13,7 @@
 //! energy as the mesh is refined, so both formulations solve the same continuum model.
 
 use super::{
-    add_isotropic_tet_hessian, add_projected_isotropic_tet_hessian, add_tet_gradient, HessianMode,
+    add_tet_gradient, set_isotropic_tet_hessian, set_projected_isotropic_tet_hessian, HessianMode,
     Term,
 };
 use crate::material::{NeoHookean, Volumetric};
@@ -105,27 +105,20 @@ impl ElasticTerm {
             add_tet_gradient(volume, g, &r.stress, grad);
         }
         if let Some(hess) = hess {
-            hess.fill(0.0);
-            let f = crate::material::Mat3::identity() + h;
             let (gt, j) = (r.gt, r.j);
             let (c, dc, d2c) = r.measure;
             let dh = material.lambda * c * dc;
             let d2h = material.lambda * (dc * dc + c * d2c);
-            let (alpha, beta) = (material.mu - dh * j, d2h * j * j + dh * j);
+            let (mu, alpha, beta) = (material.mu, material.mu - dh * j, d2h * j * j + dh * j);
             match mode {
-                HessianMode::Projected => add_projected_isotropic_tet_hessian(
-                    volume,
-                    g,
-                    &f,
-                    &gt,
-                    material.mu,
-                    alpha,
-                    beta,
-                    hess,
-                    12,
-                ),
                 HessianMode::Exact => {
-                    add_isotropic_tet_hessian(volume, g, &gt, material.mu, alpha, beta, hess, 12)
+                    set_isotropic_tet_hessian(volume, g, &gt, mu, alpha, beta, &[], hess, 12)
+                }
+                HessianMode::Projected => {
+                    let f = crate::material::Mat3::identity() + h;
+                    set_projected_isotropic_tet_hessian(
+                        volume, g, &f, &gt, mu, alpha, beta, hess, 12,
+                    )
                 }
             }
         }
@@ -169,13 +162,12 @@ impl ElasticTerm {
             }
         }
         if let Some(hess) = hess {
-            hess.fill(0.0);
             let (dh, d2h) = (q * dc, q * d2c);
             let mu = self.mu[e];
             let (alpha, beta) = (mu - dh * j, d2h * j * j + dh * j);
             match mode {
                 // Only the displacement block is projected: the saddle point stays a saddle point.
-                HessianMode::Projected => add_projected_isotropic_tet_hessian(
+                HessianMode::Projected => set_projected_isotropic_tet_hessian(
                     volume,
                     g,
                     &(crate::material::Mat3::identity() + h),
@@ -187,7 +179,7 @@ impl ElasticTerm {
                     16,
                 ),
                 HessianMode::Exact => {
-                    add_isotropic_tet_hessian(volume, g, &gt, mu, alpha, beta, hess, 16)
+                    set_isotropic_tet_hessian(volume, g, &gt, mu, alpha, beta, &[], hess, 16)
                 }
             }
             for b in 0..4 {

@@ -35,8 +35,9 @@ pub trait Term: Sync {
     /// Writes the global (full, before elimination of fixed DOFs) DOF indices of element `e`.
     fn element_dofs(&self, e: usize, dofs: &mut [usize]);
     /// Energy (J) of element `e` at its local DOF values `z`; when given, writes the gradient
-    /// (length `s`) and the Hessian (`s x s`, row-major), `s = stencil_size()`. Returns `+inf` when
-    /// the element is inverted, and then leaves the outputs unspecified.
+    /// (length `s`) and the Hessian (`s x s`, row-major), `s = stencil_size()`, every entry (the
+    /// assembler reuses its buffers without zeroing them). Returns `+inf` when the element is
+    /// inverted, and then leaves the outputs unspecified.
     fn element(
         &self,
         e: usize,
@@ -84,43 +85,72 @@ pub(crate) fn add_tet_hessian(
     }
 }
 
-/// Adds the Hessian of an isotropic tangent `A = mu I + alpha T + beta O` (with
-/// `T_(ij)(kl) = G_il G_kj`, `O_(ij)(kl) = G_ij G_kl`, `G = F^{-T}`) without forming A:
-/// block (a, b) is `V [mu (g_a . g_b) I + alpha w_b w_a^T + beta w_a w_b^T]`, `w_a = G g_a`.
-/// Every Neo-Hookean tangent in this crate has this form; it costs a fifth of the general path.
+/// Writes the displacement block (the first 12 rows and columns of a `stride`-wide element
+/// Hessian) of an isotropic tangent `A = mu I + alpha T + beta O` (with `T_(ij)(kl) = G_il G_kj`,
+/// `O_(ij)(kl) = G_ij G_kl`, `G = F^{-T}`), minus the given eigenmodes `(lambda, Q)` of A, without
+/// forming A: block (a, b) is
+/// `V [mu (g_a . g_b) I + alpha w_b w_a^T + beta w_a w_b^T - sum_k lambda_k q_ka q_kb^T]` with
+/// `w_a = G g_a` and `q_ka = Q_k g_a`. Every Neo-Hookean tangent in this crate has this form; it
+/// costs a fifth of the general path. Overwrites (no zeroing needed) and computes the blocks
+/// `a >= b` only, mirroring the rest.
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn add_isotropic_tet_hessian(
+pub(crate) fn set_isotropic_tet_hessian(
     volume: f64,
     g: &[Vector3<f64>; 4],
     gt: &Mat3,
     mu: f64,
     alpha: f64,
     beta: f64,
+    removed_modes: &[(f64, Mat3)],
     hess: &mut [f64],
     stride: usize,
 ) {
     let w: [Vector3<f64>; 4] = std::array::from_fn(|a| gt * g[a]);
+    let (va, vb) = (volume * alpha, volume * beta);
+    // Blocks a >= b first (diagonal blocks are symmetric), then the modes, then the mirror.
     for a in 0..4 {
-        for b in 0..4 {
+        for b in 0..=a {
             let diagonal = volume * mu * g[a].dot(&g[b]);
             for i in 0..3 {
                 let row = (3 * a + i) * stride + 3 * b;
                 for k in 0..3 {
-                    hess[row + k] +=
-                        volume * (alpha * w[b][i] * w[a][k] + beta * w[a][i] * w[b][k]);
+                    hess[row + k] = va * w[b][i] * w[a][k] + vb * w[a][i] * w[b][k];
                 }
                 hess[row + i] += diagonal;
             }
         }
     }
+    for (lambda, q) in removed_modes {
+        let scaled = volume * lambda;
+        let qg: [Vector3<f64>; 4] = std::array::from_fn(|a| q * g[a]);
+        for a in 0..4 {
+            for b in 0..=a {
+                for i in 0..3 {
+                    let row = (3 * a + i) * stride + 3 * b;
+                    for k in 0..3 {
+                        hess[row + k] -= scaled * qg[a][i] * qg[b][k];
+                    }
+                }
+            }
+        }
+    }
+    for a in 1..4 {
+        for b in 0..a {
+            for i in 0..3 {
+                for k in 0..3 {
+                    hess[(3 * b + k) * stride + 3 * a + i] = hess[(3 * a + i) * stride + 3 * b + k];
+                }
+            }
+        }
+    }
 }
 
-/// [`add_isotropic_tet_hessian`] with the tangent's negative eigenvalues clamped to zero (see
-/// [`crate::material::isotropic_tangent_negative_modes`]): each negative mode `(lambda, Q)` takes
-/// `V lambda w_a w_b^T`, `w_a = Q g_a`, back out of block (a, b). The result is the Hessian of the
-/// projected tangent, positive semi-definite per element.
+/// [`set_isotropic_tet_hessian`] with the tangent's negative eigenvalues clamped to zero (see
+/// [`crate::material::isotropic_tangent_negative_modes`]): each negative mode `(lambda, Q)` is
+/// taken back out. The result is the Hessian of the projected tangent, positive semi-definite
+/// per element.
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn add_projected_isotropic_tet_hessian(
+pub(crate) fn set_projected_isotropic_tet_hessian(
     volume: f64,
     g: &[Vector3<f64>; 4],
     f: &Mat3,
@@ -131,22 +161,9 @@ pub(crate) fn add_projected_isotropic_tet_hessian(
     hess: &mut [f64],
     stride: usize,
 ) {
-    add_isotropic_tet_hessian(volume, g, gt, mu, alpha, beta, hess, stride);
     let mut modes = [(0.0, Mat3::zeros()); 9];
     let n = crate::material::isotropic_tangent_negative_modes(f, mu, alpha, beta, &mut modes);
-    for (lambda, q) in &modes[..n] {
-        let w: [Vector3<f64>; 4] = std::array::from_fn(|a| q * g[a]);
-        for a in 0..4 {
-            for b in 0..4 {
-                for i in 0..3 {
-                    let row = (3 * a + i) * stride + 3 * b;
-                    for k in 0..3 {
-                        hess[row + k] -= volume * lambda * w[a][i] * w[b][k];
-                    }
-                }
-            }
-        }
-    }
+    set_isotropic_tet_hessian(volume, g, gt, mu, alpha, beta, &modes[..n], hess, stride);
 }
 
 #[cfg(test)]
@@ -205,8 +222,8 @@ mod tests {
                 projected_states += usize::from(reference_tangent != a);
                 let mut reference = vec![0.0; 144];
                 add_tet_hessian(0.7, &g, &reference_tangent, &mut reference, 12);
-                let mut analytic = vec![0.0; 144];
-                add_projected_isotropic_tet_hessian(
+                let mut analytic = vec![f64::NAN; 144];
+                set_projected_isotropic_tet_hessian(
                     0.7,
                     &g,
                     &f,
