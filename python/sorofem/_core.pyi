@@ -121,6 +121,9 @@ class Model:
         """Cable `cable`'s alpha (> 0; 1 = rest, < 1 = pulled)."""
     def set_cable_stiffness(self, cable: int, stiffness: float) -> None:
         """Cable `cable`'s segment stiffness, N/m (> 0)."""
+    def time_factorization(self, repeats: int) -> list[float]:
+        """Seconds of each of `repeats` bare numeric factorisations of the Hessian at the last
+        equilibrium (the rest state before any solve): a benchmark diagnostic."""
     def adjoint(self, d_objective_d_positions: _F) -> dict[str, Any]:
         """Adjoint gradient of a scalar objective of the last equilibrium's positions:
         dO/dx (n, 3) -> dO/dtheta as {"mu", "lam", "rho": (m,), "gravity": (3,),

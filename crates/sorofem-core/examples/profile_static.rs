@@ -127,6 +127,7 @@ fn main() {
         lambda: vec![lambda; m],
         volumetric: Volumetric::Log,
         formulation: ElementFormulation::Standard,
+        pressure_iterates: None,
     };
     let mut fixed_dofs = vec![false; 3 * n];
     for &i in &fixed {

@@ -669,6 +669,7 @@ mod tests {
             lambda: vec![1.0; m],
             volumetric: Volumetric::Log,
             formulation: Formulation::Standard,
+            pressure_iterates: None,
         };
         let mut fixed = vec![false; 3 * mesh.n_nodes()];
         fixed[..9].fill(true);

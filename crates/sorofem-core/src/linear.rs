@@ -219,6 +219,11 @@ impl SparseFactor {
         }
     }
 
+    /// Whether the numeric factorisation runs on one thread (leaving the other cores free).
+    pub fn is_sequential(&self) -> bool {
+        matches!(self.parallelism(), faer::Par::Seq)
+    }
+
     /// Number of stored values in the factor (a measure of fill-in and memory).
     pub fn factor_nnz(&self) -> usize {
         self.values.len()

@@ -140,6 +140,7 @@ impl Model {
             lambda: vec![1.0; n_tets],
             volumetric,
             formulation: element_formulation,
+            pressure_iterates: None,
         };
         let n_full = match formulation {
             Formulation::Standard => n_displacement,
@@ -435,6 +436,8 @@ impl Model {
         } else {
             loads.prescribed.clone()
         };
+        let pressure_iterates =
+            options.pressure_iterates && self.formulation == Formulation::Standard;
         let mut problem = System {
             model: self,
             full_load,
@@ -442,11 +445,14 @@ impl Model {
             load_free_norm: 0.0,
             prescribed,
             step: None,
+            pressure_iterates,
+            linearised_pressures: Vec::new(),
         };
         // Only the prescribed displacements are scaled by the load factor: the initial guess is
         // kept as given for the free DOFs, which is what warm starts need.
         let report = newton::solve(&mut problem, &mut z, options)?;
         let full_load = std::mem::take(&mut problem.full_load);
+        drop(problem);
         // Reaction = internal force minus applied load at the supports, so that the reactions
         // balance the loads: sum(reactions) + sum(loads) = 0 at equilibrium.
         let internal = self.assembler.full_gradient(&self.terms(), &z);
@@ -726,6 +732,8 @@ impl Model {
                         trial[d] = predicted[f];
                     }
                 }
+                let pressure_iterates =
+                    options.pressure_iterates && self.formulation == Formulation::Standard;
                 let mut problem = System {
                     model: self,
                     full_load: full_load.clone(),
@@ -733,10 +741,13 @@ impl Model {
                     load_free_norm: 0.0,
                     prescribed: prescribed.clone(),
                     step: Some(step),
+                    pressure_iterates,
+                    linearised_pressures: Vec::new(),
                 };
                 problem.model.cables.begin_step(h, &z);
                 let outcome = newton::solve(&mut problem, &mut trial, &step_options);
                 problem.model.cables.end_step();
+                drop(problem);
                 match outcome {
                     Ok(report) => {
                         iterations += report.iterations;
@@ -856,6 +867,18 @@ struct System<'a> {
     prescribed: Vec<[f64; 3]>,
     /// Inertia and damping of an implicit Euler step, when the solve is one.
     step: Option<StepTerms>,
+    /// [`NewtonOptions::pressure_iterates`] (standard formulation only).
+    pressure_iterates: bool,
+    /// The element pressures linearised at the state the last direction was computed at.
+    linearised_pressures: Vec<crate::energy::elastic::LinearisedPressure>,
+}
+
+/// The pressure iterates belong to one solve: the model's Hessians are exact again afterwards
+/// (sensitivities, the next solve), whichever way the solve ended.
+impl Drop for System<'_> {
+    fn drop(&mut self) {
+        self.model.elastic.pressure_iterates = None;
+    }
 }
 
 /// The quadratic terms implicit Euler adds to the energy (free DOFs `d`):
@@ -1076,13 +1099,29 @@ impl NewtonProblem for System<'_> {
         timings.assembly += t0.elapsed().as_secs_f64();
         let pattern = self.model.assembler.pattern();
         let t0 = Instant::now();
-        let ok = match self.model.formulation {
-            Formulation::Standard => self.model.factor.factor_llt(pattern, &eval.hessian),
-            Formulation::Mixed { .. } => self.model.factor.factor_ldlt(pattern, &eval.hessian),
+        let (factor, elastic) = (&mut self.model.factor, &self.model.elastic);
+        let beside = self.pressure_iterates && factor.is_sequential();
+        let mut factorise = || {
+            let t0 = Instant::now();
+            let ok = match elastic.formulation {
+                ElementFormulation::Standard => factor.factor_llt(pattern, &eval.hessian),
+                ElementFormulation::Mixed { .. } => factor.factor_ldlt(pattern, &eval.hessian),
+            };
+            (ok, t0.elapsed().as_secs_f64())
         };
+        // The pressure linearisation at z runs on the core the (single-threaded) factorisation
+        // leaves idle.
+        let ((ok, seconds), linearised) = if beside {
+            rayon::join(factorise, || elastic.linearised_pressures(z))
+        } else if self.pressure_iterates {
+            (factorise(), elastic.linearised_pressures(z))
+        } else {
+            (factorise(), Vec::new())
+        };
+        timings.assembly += t0.elapsed().as_secs_f64() - seconds;
+        self.linearised_pressures = linearised;
         self.model.hessian_scratch = eval;
         let ok = ok?;
-        let seconds = t0.elapsed().as_secs_f64();
         timings.factorization += seconds;
         timings.factorizations += 1;
         if !ok {
@@ -1114,6 +1153,27 @@ impl NewtonProblem for System<'_> {
             timings.failed_factorizations += 1;
         }
         Ok(usable.then_some(d))
+    }
+
+    fn start_iterates(&mut self, z: &[f64]) {
+        if self.pressure_iterates {
+            let pressures = self.model.elastic.pressures_at(z);
+            self.model.elastic.pressure_iterates = Some(pressures);
+        }
+    }
+
+    fn advance_iterates(&mut self, z: &[f64], d: &[f64], t: f64) {
+        if self.pressure_iterates {
+            let mut dz = vec![0.0; z.len()];
+            for (&full, di) in self.model.assembler.full_of_free().iter().zip(d) {
+                dz[full] = *di;
+            }
+            if self.linearised_pressures.is_empty() {
+                self.linearised_pressures = self.model.elastic.linearised_pressures(z);
+            }
+            let linearised = std::mem::take(&mut self.linearised_pressures);
+            self.model.elastic.advance_pressures(&linearised, &dz, t);
+        }
     }
 
     fn step(&self, z: &mut [f64], d: &[f64], t: f64) {

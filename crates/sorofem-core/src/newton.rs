@@ -63,6 +63,13 @@ pub struct NewtonOptions {
     pub load_steps: usize,
     /// How many times in total an increment may be halved after a failure.
     pub max_cutbacks: usize,
+    /// Standard formulation: Hessians take their volumetric stiffness at element pressure
+    /// iterates (Newton's method on the element-wise perturbed-Lagrangian form of the same
+    /// energy; see [`crate::energy::ElasticTerm::advance_pressures`]) rather than at
+    /// `lambda c(J)`. Same solution, quadratic convergence, and far fewer iterations when the
+    /// body rotates: the 0.4 m cantilever at 8x2x2 cells takes 10 instead of 13, the 1 m one
+    /// at 48x8x8 cells 12 instead of 18. `false`: the exact Hessian of the energy.
+    pub pressure_iterates: bool,
 }
 
 impl Default for NewtonOptions {
@@ -72,6 +79,7 @@ impl Default for NewtonOptions {
             max_iterations: 50,
             load_steps: 1,
             max_cutbacks: 8,
+            pressure_iterates: true,
         }
     }
 }
@@ -107,6 +115,12 @@ pub trait NewtonProblem {
     fn nonmonotone_factor(&self) -> f64 {
         0.0
     }
+    /// Called before the first iteration of each load step at its starting point `z`, and
+    /// after each accepted step `t d` from `z`: problems that carry iterates of their own
+    /// besides `z` (the element pressures of [`NewtonOptions::pressure_iterates`]) set and
+    /// advance them here.
+    fn start_iterates(&mut self, _z: &[f64]) {}
+    fn advance_iterates(&mut self, _z: &[f64], _d: &[f64], _t: f64) {}
     /// Adds `t d` (free DOFs) to `z`.
     fn step(&self, z: &mut [f64], d: &[f64], t: f64);
 }
@@ -182,7 +196,9 @@ fn newton_step(
     options: &NewtonOptions,
     report: &mut SolveReport,
 ) -> Result<bool> {
+    // Element-wise work, like an assembly: timed as one.
     let t0 = Instant::now();
+    problem.start_iterates(z);
     let (mut energy, mut g) = problem.merit_and_gradient(z);
     report.timings.assembly += t0.elapsed().as_secs_f64();
     if !energy.is_finite() {
@@ -278,6 +294,9 @@ fn newton_step(
         let predicted = -(t - 0.5 * t * t) * slope;
         let previous = *report.energy_history.last().expect("the start is recorded");
         exact_next = !projected || (t == 1.0 && previous - energy > 0.5 * predicted);
+        let t0 = Instant::now();
+        problem.advance_iterates(z, &d, t);
+        report.timings.assembly += t0.elapsed().as_secs_f64();
         z.copy_from_slice(&trial);
         report.step_lengths.push(t);
         g_norm = norm(&g);

@@ -38,6 +38,31 @@ impl ParamVector {
 }
 
 impl Model {
+    /// Seconds of each of `repeats` numeric factorisations of the exact Hessian at the last
+    /// static solution (the rest state before any solve), with nothing running beside them: the
+    /// bare cost a Newton iteration is measured against. A diagnostic for benchmarks.
+    pub fn time_factorization(&mut self, repeats: usize) -> Result<Vec<f64>> {
+        let z = match &self.last_state {
+            Some((z, _)) => z.clone(),
+            None => vec![0.0; self.assembler.n_full()],
+        };
+        let eval = self
+            .assembler
+            .evaluate(&self.terms(), &z, false, Some(HessianMode::Exact));
+        let pattern = self.assembler.pattern();
+        self.factor_at_solution = false;
+        (0..repeats)
+            .map(|_| {
+                let t0 = std::time::Instant::now();
+                match self.formulation {
+                    Formulation::Standard => self.factor.factor_llt(pattern, &eval.hessian)?,
+                    Formulation::Mixed { .. } => self.factor.factor_ldlt(pattern, &eval.hessian)?,
+                };
+                Ok(t0.elapsed().as_secs_f64())
+            })
+            .collect()
+    }
+
     /// Factors the exact Hessian at the last static solution (once per solution).
     fn prepare_sensitivities(&mut self) -> Result<()> {
         let Some((z, _)) = &self.last_state else {

@@ -25,6 +25,7 @@ fn elastic(mesh: &Arc<TetMesh>, volumetric: Volumetric, formulation: Formulation
         lambda: (0..m).map(|e| 3e5 * (1.0 + 0.05 * e as f64)).collect(),
         volumetric,
         formulation,
+        pressure_iterates: None,
     }
 }
 
@@ -321,5 +322,55 @@ fn parallel_assembly_matches_a_serial_dense_sum() {
             assert!(energy.is_finite());
             assert!((eval.energy - energy).abs() <= 1e-12 * energy.abs());
         }
+    }
+}
+
+/// The element pressure iterates of a Newton solve: where they are consistent (`lambda c(J)`),
+/// the Hessian is the exact one; one full step along `dz` moves them by the derivative of
+/// `lambda c(J(z + x dz))` at x = 0 (checked by central differences).
+#[test]
+fn pressure_iterates_are_consistent_and_linearise_the_volumetric_constraint() {
+    let mesh = small_mesh();
+    let n = mesh.n_nodes();
+    let mut term = elastic(&mesh, Volumetric::Log, Formulation::Standard);
+    let z = deformed_state(&mesh, 0, 21);
+    let dz = deformed_state(&mesh, 0, 22);
+    let fixed = vec![false; 3 * n];
+    let assembler = Assembler::new(&fixed, &[&term]);
+    let exact = assembler.evaluate(&[&term], &z, false, Some(HessianMode::Exact));
+    term.pressure_iterates = Some(term.pressures_at(&z));
+    let consistent = assembler.evaluate(&[&term], &z, false, Some(HessianMode::Exact));
+    let scale = exact.hessian.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    for (a, b) in exact.hessian.iter().zip(&consistent.hessian) {
+        assert!((a - b).abs() <= 1e-12 * scale, "{a} vs {b}");
+    }
+    let start = term.pressure_iterates.clone().unwrap();
+    let linearised = term.linearised_pressures(&z);
+    term.advance_pressures(&linearised, &dz, 1.0);
+    let moved: Vec<f64> = term
+        .pressure_iterates
+        .as_ref()
+        .unwrap()
+        .iter()
+        .zip(&start)
+        .map(|(p, p0)| p - p0)
+        .collect();
+    let along = |x: &[f64]| {
+        let shifted: Vec<f64> = z.iter().zip(&dz).map(|(a, b)| a + x[0] * b).collect();
+        term.pressures_at(&shifted)
+    };
+    check_jacobian("pressure update", &[0.0], 1e-6, along, &moved, 1e-6, 1e-9);
+    // Half a step moves them half the way.
+    term.pressure_iterates = Some(start.clone());
+    term.advance_pressures(&linearised, &dz, 0.5);
+    for ((p, p0), m) in term
+        .pressure_iterates
+        .as_ref()
+        .unwrap()
+        .iter()
+        .zip(&start)
+        .zip(&moved)
+    {
+        assert!((p - p0 - 0.5 * m).abs() <= 1e-12 * m.abs().max(1.0));
     }
 }

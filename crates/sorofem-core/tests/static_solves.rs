@@ -112,8 +112,8 @@ fn slender_cantilever_matches_euler_bernoulli() {
 
 #[test]
 fn paper_cantilevers_converge_quadratically_in_one_load_step() {
-    // The issue targets 12 and 25; on the paper's symmetric split (box2.tet) the 0.4 m beam takes 13.
-    for (length, max_iterations) in [(0.4, 13), (1.0, 25)] {
+    // The issue's targets (the paper's code needs 19 to 42 on the first).
+    for (length, max_iterations) in [(0.4, 12), (1.0, 25)] {
         let mut model = cantilever(
             [length, 0.1, 0.1],
             [8, 2, 2],
@@ -142,6 +142,54 @@ fn paper_cantilevers_converge_quadratically_in_one_load_step() {
             h[last] < 10.0 * h[last - 1].powf(1.5) || h[last - 1] < 1e-6,
             "{h:?}"
         );
+    }
+}
+
+/// Newton with element pressure iterates takes the volumetric part of its Hessians at those
+/// iterates, not at lambda c(J): the equilibrium must be the one of the exact Hessian (same
+/// energy, same gradient), reached in fewer iterations on the large-rotation cantilevers.
+#[test]
+fn pressure_iterates_reach_the_exact_hessians_equilibrium_in_fewer_iterations() {
+    for (length, cells) in [(0.4, [8, 2, 2]), (1.0, [8, 2, 2]), (1.0, [16, 4, 4])] {
+        let mut model = cantilever(
+            [length, 0.1, 0.1],
+            cells,
+            66e3,
+            0.45,
+            1080.0,
+            Formulation::Standard,
+        );
+        let loads = Loads {
+            gravity: [0.0, 0.0, -9.81],
+            ..Default::default()
+        };
+        let solve = |model: &mut Model, pressure_iterates: bool| {
+            let options = SolveOptions {
+                tolerance: 1e-10,
+                pressure_iterates,
+                ..Default::default()
+            };
+            model.solve(&loads, None, &options).unwrap()
+        };
+        let exact = solve(&mut model, false);
+        let iterated = solve(&mut model, true);
+        let rest = model.mesh().rest_flat().to_vec();
+        let scale = exact
+            .positions
+            .iter()
+            .zip(&rest)
+            .fold(0.0f64, |m, (x, r)| m.max((x - r).abs()));
+        let difference = exact
+            .positions
+            .iter()
+            .zip(&iterated.positions)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        eprintln!(
+            "L = {length} {cells:?}: {} iterations with pressure iterates, {} without; max |du| = {difference:.2e} of {scale:.3}",
+            iterated.report.iterations, exact.report.iterations
+        );
+        assert!(difference <= 1e-7 * scale, "{difference} vs {scale}");
+        assert!(iterated.report.iterations < exact.report.iterations);
     }
 }
 

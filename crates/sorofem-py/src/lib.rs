@@ -430,6 +430,13 @@ impl Model {
         Ok(out)
     }
 
+    /// Seconds of each of `repeats` bare numeric factorisations of the Hessian at the last
+    /// equilibrium (benchmark diagnostic).
+    fn time_factorization(&mut self, py: Python<'_>, repeats: usize) -> PyResult<Vec<f64>> {
+        let inner = &mut self.inner;
+        py.detach(|| inner.time_factorization(repeats)).py(py)
+    }
+
     /// Adjoint gradient of a scalar objective of the last equilibrium's node positions:
     /// `d_objective_d_positions` (n, 3) -> dict of dO/dtheta ("mu", "lam", "rho" per tet,
     /// "gravity" (3,), "cable_actuation", "cable_stiffness" per cable).

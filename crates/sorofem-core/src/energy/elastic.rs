@@ -18,6 +18,7 @@ use super::{
 };
 use crate::material::{NeoHookean, Volumetric};
 use crate::mesh::TetMesh;
+use rayon::prelude::*;
 use std::sync::Arc;
 
 /// The pressure mass matrix `M_p` of the mixed formulation.
@@ -39,6 +40,14 @@ pub enum Formulation {
     },
 }
 
+/// One tet's pressure `lambda c(J)` (Pa) at a state and its gradient with respect to the tet's
+/// four nodal displacements (Pa/m): `lambda c'(J) J F^{-T} g_a`.
+#[derive(Clone, Copy, Debug)]
+pub struct LinearisedPressure {
+    pub value: f64,
+    pub gradient: [[f64; 3]; 4],
+}
+
 /// Elastic energy of all tets. `mu` and `lambda` are per tet (Pa).
 pub struct ElasticTerm {
     pub mesh: Arc<TetMesh>,
@@ -46,6 +55,12 @@ pub struct ElasticTerm {
     pub lambda: Vec<f64>,
     pub volumetric: Volumetric,
     pub formulation: Formulation,
+    /// Standard formulation: element pressures `p_e` (Pa, one per tet) at which the Hessian
+    /// takes its volumetric part, `lambda c'^2 dJ dJ + p_e (c'' dJ dJ + c' d2J)`, instead of at
+    /// `p_e = lambda c(J_e)`; energy and gradient are unchanged. Newton solves set them (see
+    /// [`ElasticTerm::pressures_at`], [`ElasticTerm::advance_pressures`]); `None` gives the
+    /// exact Hessian.
+    pub pressure_iterates: Option<Vec<f64>>,
 }
 
 impl ElasticTerm {
@@ -70,6 +85,99 @@ impl ElasticTerm {
                 }
             }
         }
+    }
+
+    /// The element pressures `lambda_e c(J_e)` (Pa, one per tet) of the energy itself at the
+    /// full DOF vector `z`: the pressure iterates a Newton solve starts from. Standard
+    /// formulation; `+inf` for an inverted tet.
+    pub fn pressures_at(&self, z: &[f64]) -> Vec<f64> {
+        (0..self.mesh.n_tets())
+            .into_par_iter()
+            .map(|e| {
+                let (_, j, c, _) = self.volume_state(e, z);
+                if j > 0.0 {
+                    self.lambda[e] * c
+                } else {
+                    f64::INFINITY
+                }
+            })
+            .collect()
+    }
+
+    /// Each tet's pressure `lambda c(J)` and its gradient with respect to the tet's nodal
+    /// displacements at the full DOF vector `z`: what [`ElasticTerm::advance_pressures`] moves
+    /// the pressure iterates with. Standard formulation.
+    pub fn linearised_pressures(&self, z: &[f64]) -> Vec<LinearisedPressure> {
+        (0..self.mesh.n_tets())
+            .into_par_iter()
+            .map(|e| {
+                let (gt, j, c, dc) = self.volume_state(e, z);
+                let lambda = self.lambda[e];
+                // dJ/du_a = J F^{-T} g_a.
+                let scale = lambda * dc * j;
+                let g = self.mesh.shape_gradients(e);
+                LinearisedPressure {
+                    value: if j > 0.0 { lambda * c } else { f64::NAN },
+                    gradient: std::array::from_fn(|a| (gt * g[a] * scale).into()),
+                }
+            })
+            .collect()
+    }
+
+    /// Moves the pressure iterates the step `t dz` (full DOFs) from the state `linearised`
+    /// describes, as Newton's method on the element-wise (P1-P0) perturbed-Lagrangian form of the
+    /// energy, `W_mu(u) + sum_e V_e [p_e c(J_e) - p_e^2 / (2 lambda_e)]`, moves its pressures: the
+    /// linearised constraint `p_e = lambda_e (c(J_e) + c'(J_e) dJ_e)`, `dJ_e = J_e F_e^{-T} : dH_e`,
+    /// gives the full step, of which `t` is taken. Eliminating `p_e` from that form gives back
+    /// the standard energy, so the solution is the same; the iterates differ from `lambda c(J)`
+    /// only while the linearised volume change is off, as when a rotation makes the
+    /// displacement update stretch elements spuriously.
+    pub fn advance_pressures(&mut self, linearised: &[LinearisedPressure], dz: &[f64], t: f64) {
+        let Some(mut pressures) = self.pressure_iterates.take() else {
+            return;
+        };
+        let tets = self.mesh.tets();
+        pressures
+            .par_iter_mut()
+            .zip(linearised)
+            .zip(tets)
+            .for_each(|((p, linear), tet)| {
+                let mut full = linear.value;
+                for (gradient, &node) in linear.gradient.iter().zip(tet) {
+                    for k in 0..3 {
+                        full += gradient[k] * dz[3 * node + k];
+                    }
+                }
+                if full.is_finite() {
+                    *p += t * (full - *p);
+                }
+            });
+        self.pressure_iterates = Some(pressures);
+    }
+
+    /// `(F^{-T}, J, c(J), c'(J))` of tet `e` at the full DOF vector `z`; `J <= 0` (and the rest
+    /// unspecified) for an inverted tet.
+    fn volume_state(&self, e: usize, z: &[f64]) -> (crate::material::Mat3, f64, f64, f64) {
+        let h = self.displacement_gradient_of(e, z);
+        match crate::material::inverse_transpose(&(crate::material::Mat3::identity() + h)) {
+            Some((gt, j)) => {
+                let (c, dc, _) = self
+                    .volumetric
+                    .measure_near_one(crate::material::neo_hookean::j_minus_one(&h));
+                (gt, j, c, dc)
+            }
+            None => (crate::material::Mat3::zeros(), 0.0, 0.0, 0.0),
+        }
+    }
+
+    /// [`ElasticTerm::displacement_gradient`] of tet `e` from the full DOF vector `z`.
+    fn displacement_gradient_of(&self, e: usize, z: &[f64]) -> crate::material::Mat3 {
+        let tet = self.mesh.tets()[e];
+        let mut u = [0.0; 12];
+        for (a, &node) in tet.iter().enumerate() {
+            u[3 * a..3 * a + 3].copy_from_slice(&z[3 * node..3 * node + 3]);
+        }
+        self.displacement_gradient(e, &u)
     }
 
     /// `H = F - I = sum_a u_a g_a^T` from the element's nodal displacements (m). Working with
@@ -107,8 +215,12 @@ impl ElasticTerm {
         if let Some(hess) = hess {
             let (gt, j) = (r.gt, r.j);
             let (c, dc, d2c) = r.measure;
-            let dh = material.lambda * c * dc;
-            let d2h = material.lambda * (dc * dc + c * d2c);
+            let pressure = self
+                .pressure_iterates
+                .as_ref()
+                .map_or(material.lambda * c, |p| p[e]);
+            let dh = pressure * dc;
+            let d2h = material.lambda * dc * dc + pressure * d2c;
             let (mu, alpha, beta) = (material.mu, material.mu - dh * j, d2h * j * j + dh * j);
             match mode {
                 HessianMode::Exact => {
