@@ -447,6 +447,8 @@ impl Model {
             step: None,
             pressure_iterates,
             linearised_pressures: Vec::new(),
+            pressure_base: Vec::new(),
+            hessian_prepared: false,
         };
         // Only the prescribed displacements are scaled by the load factor: the initial guess is
         // kept as given for the free DOFs, which is what warm starts need.
@@ -743,6 +745,8 @@ impl Model {
                     step: Some(step),
                     pressure_iterates,
                     linearised_pressures: Vec::new(),
+                    pressure_base: Vec::new(),
+                    hessian_prepared: false,
                 };
                 problem.model.cables.begin_step(h, &z);
                 let outcome = newton::solve(&mut problem, &mut trial, &step_options);
@@ -871,6 +875,11 @@ struct System<'a> {
     pressure_iterates: bool,
     /// The element pressures linearised at the state the last direction was computed at.
     linearised_pressures: Vec<crate::energy::elastic::LinearisedPressure>,
+    /// The element pressure iterates of the current iterate (the model's elastic term holds
+    /// those of the state last moved to with `trial_iterates`).
+    pressure_base: Vec<f64>,
+    /// The model's Hessian scratch holds the exact Hessian at the state last evaluated.
+    hessian_prepared: bool,
 }
 
 /// The pressure iterates belong to one solve: the model's Hessians are exact again afterwards
@@ -986,6 +995,39 @@ impl System<'_> {
             .map(|&d| z[d])
             .collect()
     }
+
+    /// The merit (see [`NewtonProblem::merit_and_gradient`]) from the terms' energy and
+    /// gradient at `z`.
+    fn merit(&self, z: &[f64], energy: f64, gradient: Vec<f64>) -> (f64, Vec<f64>) {
+        if !energy.is_finite() {
+            return (f64::INFINITY, vec![f64::INFINITY; gradient.len()]);
+        }
+        let mut g = gradient;
+        for (gi, &d) in g.iter_mut().zip(self.model.assembler.full_of_free()) {
+            *gi -= self.load[d];
+        }
+        let free_values = self.step.as_ref().map(|_| self.free_values(z));
+        if let (Some(step), Some(free)) = (&self.step, &free_values) {
+            step.add_gradient(free, self.model.assembler.pattern(), &mut g);
+        }
+        if self.is_mixed() {
+            let n = self.n_nodes();
+            let len = g.len();
+            g[len - n..]
+                .iter_mut()
+                .for_each(|v| *v *= self.model.pressure_weight);
+            if g.iter().any(|v| !v.is_finite()) {
+                return (f64::INFINITY, g);
+            }
+            return (0.5 * g.iter().map(|v| v * v).sum::<f64>(), g);
+        }
+        let external: f64 = self.load.iter().zip(z.iter()).map(|(f, x)| f * x).sum();
+        let mut energy = energy - external;
+        if let (Some(step), Some(free)) = (&self.step, &free_values) {
+            energy += step.energy(free, self.model.assembler.pattern());
+        }
+        (energy, g)
+    }
 }
 
 impl NewtonProblem for System<'_> {
@@ -1022,38 +1064,27 @@ impl NewtonProblem for System<'_> {
     /// Gradient: of the energy minus the loads; in the mixed formulation the volume-constraint
     /// rows (m^3) are multiplied by the pressure weight so that they are forces too.
     fn merit_and_gradient(&mut self, z: &mut [f64]) -> (f64, Vec<f64>) {
+        self.hessian_prepared = false;
         let eval = self
             .model
             .assembler
             .evaluate(&self.model.terms(), z, true, None);
-        if !eval.energy.is_finite() {
-            return (f64::INFINITY, vec![f64::INFINITY; eval.gradient.len()]);
-        }
-        let mut g = eval.gradient;
-        for (gi, &d) in g.iter_mut().zip(self.model.assembler.full_of_free()) {
-            *gi -= self.load[d];
-        }
-        let free_values = self.step.as_ref().map(|_| self.free_values(z));
-        if let (Some(step), Some(free)) = (&self.step, &free_values) {
-            step.add_gradient(free, self.model.assembler.pattern(), &mut g);
-        }
-        if self.is_mixed() {
-            let n = self.n_nodes();
-            let len = g.len();
-            g[len - n..]
-                .iter_mut()
-                .for_each(|v| *v *= self.model.pressure_weight);
-            if g.iter().any(|v| !v.is_finite()) {
-                return (f64::INFINITY, g);
-            }
-            return (0.5 * g.iter().map(|v| v * v).sum::<f64>(), g);
-        }
-        let external: f64 = self.load.iter().zip(z.iter()).map(|(f, x)| f * x).sum();
-        let mut energy = eval.energy - external;
-        if let (Some(step), Some(free)) = (&self.step, &free_values) {
-            energy += step.energy(free, self.model.assembler.pattern());
-        }
-        (energy, g)
+        self.merit(z, eval.energy, eval.gradient)
+    }
+
+    fn merit_gradient_and_hessian(&mut self, z: &mut [f64]) -> (f64, Vec<f64>) {
+        let mut eval = std::mem::take(&mut self.model.hessian_scratch);
+        self.model.assembler.evaluate_into(
+            &self.model.terms(),
+            z,
+            true,
+            Some(HessianMode::Exact),
+            &mut eval,
+        );
+        let (energy, gradient) = (eval.energy, std::mem::take(&mut eval.gradient));
+        self.model.hessian_scratch = eval;
+        self.hessian_prepared = energy.is_finite();
+        self.merit(z, energy, gradient)
     }
 
     fn slope(&self, g: &[f64], d: &[f64]) -> f64 {
@@ -1090,9 +1121,16 @@ impl NewtonProblem for System<'_> {
         };
         let t0 = Instant::now();
         let mut eval = std::mem::take(&mut self.model.hessian_scratch);
-        self.model
-            .assembler
-            .evaluate_into(&self.model.terms(), z, false, Some(mode), &mut eval);
+        if !(self.hessian_prepared && mode == HessianMode::Exact) {
+            self.model.assembler.evaluate_into(
+                &self.model.terms(),
+                z,
+                false,
+                Some(mode),
+                &mut eval,
+            );
+        }
+        self.hessian_prepared = false;
         if let Some(step) = &self.step {
             step.add_hessian(&mut eval.hessian);
         }
@@ -1157,12 +1195,12 @@ impl NewtonProblem for System<'_> {
 
     fn start_iterates(&mut self, z: &[f64]) {
         if self.pressure_iterates {
-            let pressures = self.model.elastic.pressures_at(z);
-            self.model.elastic.pressure_iterates = Some(pressures);
+            self.pressure_base = self.model.elastic.pressures_at(z);
+            self.model.elastic.pressure_iterates = Some(self.pressure_base.clone());
         }
     }
 
-    fn advance_iterates(&mut self, z: &[f64], d: &[f64], t: f64) {
+    fn trial_iterates(&mut self, z: &[f64], d: &[f64], t: f64) {
         if self.pressure_iterates {
             let mut dz = vec![0.0; z.len()];
             for (&full, di) in self.model.assembler.full_of_free().iter().zip(d) {
@@ -1171,8 +1209,17 @@ impl NewtonProblem for System<'_> {
             if self.linearised_pressures.is_empty() {
                 self.linearised_pressures = self.model.elastic.linearised_pressures(z);
             }
-            let linearised = std::mem::take(&mut self.linearised_pressures);
-            self.model.elastic.advance_pressures(&linearised, &dz, t);
+            self.model.elastic.pressure_iterates = Some(self.pressure_base.clone());
+            self.model
+                .elastic
+                .advance_pressures(&self.linearised_pressures, &dz, t);
+        }
+    }
+
+    fn commit_iterates(&mut self) {
+        if let Some(pressures) = &self.model.elastic.pressure_iterates {
+            self.pressure_base.clone_from(pressures);
+            self.linearised_pressures.clear();
         }
     }
 

@@ -115,12 +115,19 @@ pub trait NewtonProblem {
     fn nonmonotone_factor(&self) -> f64 {
         0.0
     }
-    /// Called before the first iteration of each load step at its starting point `z`, and
-    /// after each accepted step `t d` from `z`: problems that carry iterates of their own
-    /// besides `z` (the element pressures of [`NewtonOptions::pressure_iterates`]) set and
-    /// advance them here.
+    /// [`NewtonProblem::merit_and_gradient`] that also assembles the exact Hessian at `z` and
+    /// keeps it for the next [`NewtonProblem::direction`] (which must then be at this `z`): one
+    /// pass over the elements instead of two when the full step is expected to be accepted.
+    fn merit_gradient_and_hessian(&mut self, z: &mut [f64]) -> (f64, Vec<f64>) {
+        self.merit_and_gradient(z)
+    }
+    /// Problems that carry iterates of their own besides `z` (the element pressures of
+    /// [`NewtonProblem::start_iterates`]) set them at the start `z` of each load step, move
+    /// them to the trial `z + t d` (before it is evaluated, for the Hessian kept with it, and
+    /// again once a step is accepted) and keep the trial's as the next iterate's.
     fn start_iterates(&mut self, _z: &[f64]) {}
-    fn advance_iterates(&mut self, _z: &[f64], _d: &[f64], _t: f64) {}
+    fn trial_iterates(&mut self, _z: &[f64], _d: &[f64], _t: f64) {}
+    fn commit_iterates(&mut self) {}
     /// Adds `t d` (free DOFs) to `z`.
     fn step(&self, z: &mut [f64], d: &[f64], t: f64);
 }
@@ -220,6 +227,8 @@ fn newton_step(
     // an assembly and a failed factorisation each time for the same steps (the 1 m cantilever
     // at 48x8x8 cells failed 11 of 19).
     let mut exact_next = true;
+    // Whether the full-step trial also assembles the Hessian there (see below).
+    let mut prepare_next = false;
     for _ in 0..options.max_iterations {
         if g_norm <= options.tolerance * reference || reference == 0.0 {
             return Ok(true);
@@ -243,6 +252,7 @@ fn newton_step(
             });
         };
         let t0 = Instant::now();
+        let mut assembly_in_search = 0.0;
         let slope = problem.slope(&g, &d);
         // The largest merit of the last five iterates (and of this one), for the non-monotone
         // Armijo test of Grippo, Lampariello and Lucidi (1986): a trial must fall below it by the
@@ -262,10 +272,19 @@ fn newton_step(
         let mut t: f64 = 1.0;
         let mut accepted = false;
         let mut trial = z.to_vec();
+        let prepare = prepare_next && !projected;
         for _ in 0..40 {
             trial.copy_from_slice(z);
             problem.step(&mut trial, &d, t);
-            let (e_trial, g_trial) = problem.merit_and_gradient(&mut trial);
+            let (e_trial, g_trial) = if prepare && t == 1.0 {
+                let t1 = Instant::now();
+                problem.trial_iterates(z, &d, t);
+                let evaluated = problem.merit_gradient_and_hessian(&mut trial);
+                assembly_in_search += t1.elapsed().as_secs_f64();
+                evaluated
+            } else {
+                problem.merit_and_gradient(&mut trial)
+            };
             if e_trial.is_finite() {
                 let factor = problem.nonmonotone_factor();
                 if e_trial <= window_max + 1e-4 * t * slope
@@ -284,22 +303,33 @@ fn newton_step(
             }
             t *= 0.5;
         }
+        report.timings.line_search += t0.elapsed().as_secs_f64() - assembly_in_search;
+        report.timings.assembly += assembly_in_search;
         if !accepted {
-            report.timings.line_search += t0.elapsed().as_secs_f64();
             return Ok(false);
         }
-        report.timings.line_search += t0.elapsed().as_secs_f64();
         // The decrease the quadratic model of the Hessian used predicts for the step t d
         // (H d = -g): -(t - t^2 / 2) g.d.
         let predicted = -(t - 0.5 * t * t) * slope;
         let previous = *report.energy_history.last().expect("the start is recorded");
         exact_next = !projected || (t == 1.0 && previous - energy > 0.5 * predicted);
         let t0 = Instant::now();
-        problem.advance_iterates(z, &d, t);
+        if !(prepare && t == 1.0) {
+            problem.trial_iterates(z, &d, t);
+        }
+        problem.commit_iterates();
         report.timings.assembly += t0.elapsed().as_secs_f64();
         z.copy_from_slice(&trial);
         report.step_lengths.push(t);
-        g_norm = norm(&g);
+        // In the converging phase (a full step from an exact Hessian) the next full step is
+        // likely accepted at once: its trial then assembles the Hessian there too, saving a
+        // pass over the elements per iteration. Not when the next step probably converges (the
+        // residual ratio squared says so): that Hessian would never be used.
+        let new_norm = norm(&g);
+        let ratio = new_norm / g_norm;
+        prepare_next =
+            t == 1.0 && !projected && new_norm * ratio * ratio > options.tolerance * reference;
+        g_norm = new_norm;
         report.residual_norm = g_norm;
         report.residual_history.push(g_norm / reference);
         report.energy_history.push(energy);
