@@ -122,7 +122,7 @@ pub trait NewtonProblem {
         self.merit_and_gradient(z)
     }
     /// Problems that carry iterates of their own besides `z` (the element pressures of
-    /// [`NewtonProblem::start_iterates`]) set them at the start `z` of each load step, move
+    /// [`NewtonOptions::pressure_iterates`]) set them at the start `z` of each load step, move
     /// them to the trial `z + t d` (before it is evaluated, for the Hessian kept with it, and
     /// again once a step is accepted) and keep the trial's as the next iterate's.
     fn start_iterates(&mut self, _z: &[f64]) {}
@@ -224,8 +224,9 @@ fn newton_step(
     // Whether the next iteration tries the exact Hessian first. Once the exact Hessian has been
     // indefinite, the iterations stay with the projected one until a full step matches its
     // quadratic model; trying the exact one at every iterate of a large-rotation phase costs
-    // an assembly and a failed factorisation each time for the same steps (the 1 m cantilever
-    // at 48x8x8 cells failed 11 of 19).
+    // an assembly and a failed factorisation each time for the same steps (with the exact
+    // Hessian of the energy, without pressure iterates, the 1 m cantilever at 48x8x8 cells
+    // failed 11 of 19).
     let mut exact_next = true;
     // Whether the full-step trial also assembles the Hessian there (see below).
     let mut prepare_next = false;
