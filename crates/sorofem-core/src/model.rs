@@ -1096,6 +1096,10 @@ impl NewtonProblem for System<'_> {
         }
     }
 
+    fn merit_is_energy(&self) -> bool {
+        !self.is_mixed()
+    }
+
     fn nonmonotone_factor(&self) -> f64 {
         // Half the squared residual may grow 100-fold (the residual 10-fold) over the recent
         // maximum: full Newton steps of the saddle-point system are then accepted far from the

@@ -109,6 +109,11 @@ pub trait NewtonProblem {
     fn slope(&self, g: &[f64], d: &[f64]) -> f64 {
         dot(g, d)
     }
+    /// Whether the merit is the energy the Hessian is the second derivative of (so that a
+    /// quadratic model predicts its decrease), rather than a residual norm.
+    fn merit_is_energy(&self) -> bool {
+        true
+    }
     /// A step is also accepted when its merit is at most this factor times the largest merit of
     /// the last five iterates (0: no such test). Used with residual merits (non-negative), whose
     /// Armijo test stalls far from the solution.
@@ -223,7 +228,7 @@ fn newton_step(
     report.energy_history.push(energy);
     // Whether the next iteration tries the exact Hessian first. Once the exact Hessian has been
     // indefinite, the iterations stay with the projected one until a full step matches its
-    // quadratic model; trying the exact one at every iterate of a large-rotation phase costs
+    // quadratic model (energy merits only: a residual merit's decrease is not that model's); trying the exact one at every iterate of a large-rotation phase costs
     // an assembly and a failed factorisation each time for the same steps (with the exact
     // Hessian of the energy, without pressure iterates, the 1 m cantilever at 48x8x8 cells
     // failed 11 of 19).
@@ -313,7 +318,9 @@ fn newton_step(
         // (H d = -g): -(t - t^2 / 2) g.d.
         let predicted = -(t - 0.5 * t * t) * slope;
         let previous = *report.energy_history.last().expect("the start is recorded");
-        exact_next = !projected || (t == 1.0 && previous - energy > 0.5 * predicted);
+        exact_next = !projected
+            || !problem.merit_is_energy()
+            || (t == 1.0 && previous - energy > 0.5 * predicted);
         let t0 = Instant::now();
         if !(prepare && t == 1.0) {
             problem.trial_iterates(z, &d, t);
