@@ -94,7 +94,10 @@ fn main() {
                     ..Default::default()
                 },
                 None,
-                &SolveOptions::default(),
+                &SolveOptions {
+                    load_steps: env("PROFILE_LOAD_STEPS", 1.0) as usize,
+                    ..Default::default()
+                },
             )
             .unwrap();
         let r = &s.report;
