@@ -348,10 +348,8 @@ fn newton_step(
         // residual ratio squared says so): that Hessian would never be used.
         let new_norm = norm(&g);
         let ratio = new_norm / g_norm;
-        prepare_next = std::env::var_os("XP_NOPREP").is_none()
-            && t == 1.0
-            && !projected
-            && new_norm * ratio * ratio > options.tolerance * reference;
+        prepare_next =
+            t == 1.0 && !projected && new_norm * ratio * ratio > options.tolerance * reference;
         g_norm = new_norm;
         report.residual_norm = g_norm;
         report.residual_history.push(g_norm / reference);
