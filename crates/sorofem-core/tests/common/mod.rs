@@ -112,6 +112,17 @@ pub fn cantilever(
     formulation: Formulation,
 ) -> Model {
     let mesh = Arc::new(TetMesh::box_mesh(size, cells, [0.0; 3]).unwrap());
+    clamped_at_x0(mesh, youngs, nu, density, formulation)
+}
+
+/// A model of `mesh` clamped on its nodes at x = 0, with a uniform material.
+pub fn clamped_at_x0(
+    mesh: Arc<TetMesh>,
+    youngs: f64,
+    nu: f64,
+    density: f64,
+    formulation: Formulation,
+) -> Model {
     let fixed: Vec<i64> = mesh
         .nodes_in_box([-1e-9, -1.0, -1.0], [1e-9, 1.0, 1.0])
         .iter()
