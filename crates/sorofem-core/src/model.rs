@@ -436,20 +436,7 @@ impl Model {
         } else {
             loads.prescribed.clone()
         };
-        let pressure_iterates =
-            options.pressure_iterates && self.formulation == Formulation::Standard;
-        let mut problem = System {
-            model: self,
-            full_load,
-            load: Vec::new(),
-            load_free_norm: 0.0,
-            prescribed,
-            step: None,
-            pressure_iterates,
-            linearised_pressures: Vec::new(),
-            pressure_base: Vec::new(),
-            hessian_prepared: false,
-        };
+        let mut problem = System::new(self, full_load, prescribed, None, options);
         // Only the prescribed displacements are scaled by the load factor: the initial guess is
         // kept as given for the free DOFs, which is what warm starts need.
         let report = newton::solve(&mut problem, &mut z, options)?;
@@ -734,20 +721,13 @@ impl Model {
                         trial[d] = predicted[f];
                     }
                 }
-                let pressure_iterates =
-                    options.pressure_iterates && self.formulation == Formulation::Standard;
-                let mut problem = System {
-                    model: self,
-                    full_load: full_load.clone(),
-                    load: Vec::new(),
-                    load_free_norm: 0.0,
-                    prescribed: prescribed.clone(),
-                    step: Some(step),
-                    pressure_iterates,
-                    linearised_pressures: Vec::new(),
-                    pressure_base: Vec::new(),
-                    hessian_prepared: false,
-                };
+                let mut problem = System::new(
+                    self,
+                    full_load.clone(),
+                    prescribed.clone(),
+                    Some(step),
+                    options,
+                );
                 problem.model.cables.begin_step(h, &z);
                 let outcome = newton::solve(&mut problem, &mut trial, &step_options);
                 problem.model.cables.end_step();
@@ -976,6 +956,31 @@ pub struct Trajectory {
     pub iterations: Vec<usize>,
     /// Times a step was halved after a Newton failure.
     pub cutbacks: usize,
+}
+
+impl<'a> System<'a> {
+    fn new(
+        model: &'a mut Model,
+        full_load: Vec<f64>,
+        prescribed: Vec<[f64; 3]>,
+        step: Option<StepTerms>,
+        options: &SolveOptions,
+    ) -> Self {
+        let pressure_iterates =
+            options.pressure_iterates && model.formulation == Formulation::Standard;
+        System {
+            model,
+            full_load,
+            load: Vec::new(),
+            load_free_norm: 0.0,
+            prescribed,
+            step,
+            pressure_iterates,
+            linearised_pressures: Vec::new(),
+            pressure_base: Vec::new(),
+            hessian_prepared: false,
+        }
+    }
 }
 
 impl System<'_> {
