@@ -231,6 +231,22 @@ impl TetMesh {
         &self.tets
     }
 
+    /// Length (m) of the diagonal of the rest coordinates' axis-aligned bounding box.
+    pub fn diameter(&self) -> f64 {
+        let mut low = [f64::INFINITY; 3];
+        let mut high = [f64::NEG_INFINITY; 3];
+        for p in &self.rest {
+            for k in 0..3 {
+                low[k] = low[k].min(p[k]);
+                high[k] = high[k].max(p[k]);
+            }
+        }
+        (0..3)
+            .map(|k| (high[k] - low[k]).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    }
+
     /// Rest volumes (m^3), one per tet, all positive.
     pub fn volumes(&self) -> &[f64] {
         &self.volumes
@@ -318,6 +334,12 @@ impl TetMesh {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn diameter_is_the_bounding_box_diagonal() {
+        let mesh = TetMesh::box_mesh([0.4, 0.1, 0.2], [4, 1, 2], [1.0, -2.0, 0.5]).unwrap();
+        assert!((mesh.diameter() - (0.16f64 + 0.01 + 0.04).sqrt()).abs() < 1e-15);
+    }
 
     #[test]
     fn box_has_paper_counts_and_closed_boundary() {

@@ -1237,4 +1237,21 @@ impl NewtonProblem for System<'_> {
             z[full] += t * di;
         }
     }
+
+    /// No mesh node may move farther than the rest mesh's bounding-box diagonal in one step.
+    fn step_bound(&self, d: &[f64]) -> f64 {
+        let n = self.n_nodes();
+        let mut squared = vec![0.0; n];
+        for (&full, di) in self.model.assembler.full_of_free().iter().zip(d) {
+            if full < 3 * n {
+                squared[full / 3] += di * di;
+            }
+        }
+        let longest = squared.iter().fold(0.0f64, |m, &v| m.max(v)).sqrt();
+        if longest > self.model.mesh.diameter() {
+            self.model.mesh.diameter() / longest
+        } else {
+            1.0
+        }
+    }
 }
