@@ -198,9 +198,9 @@ def _per_iteration_ratio(r: dict[str, Any]) -> float | None:
     """(time per Newton iteration) / (time of one bare numeric factorisation).
 
     A bare factorisation is timed on its own after the solve (median of five, nothing beside it:
-    `Model.time_factorization`): inside the solve the pressure linearisation runs on the core
-    the factorisation leaves idle, which slows it by a few per cent. Whatever else an iteration
-    pays for (a failed factorisation and a second, projected Hessian) counts against it.
+    `Model.time_factorization`), not taken from the solve's own timings. Whatever else an
+    iteration pays for (a failed factorisation and a second, projected Hessian) counts against
+    it.
     """
     t = r.get("timings") or {}
     bare = r.get("bare_factorization_seconds")

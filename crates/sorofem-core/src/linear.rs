@@ -195,17 +195,27 @@ impl SparseFactor {
             SymbolicCholeskyRaw::Supernodal(supernodal) => SolveSplit::new(supernodal),
             SymbolicCholeskyRaw::Simplicial(_) => None,
         };
-        Ok(SparseFactor {
+        let mut factor = SparseFactor {
             split,
-            values: vec![0.0; symbolic.len_val()],
+            values: written_zeros(symbolic.len_val()),
             symbolic,
             stored: Stored::None,
             scratch: None,
             order: order.to_vec(),
-            permuted_values: vec![0.0; permuted.nnz()],
+            permuted_values: written_zeros(permuted.nnz()),
             permuted,
             slot,
-        })
+        };
+        // The numeric factorisations' workspace, allocated and written now as well.
+        let par = factor.parallelism();
+        let req = factor
+            .symbolic
+            .factorize_numeric_llt_scratch::<f64>(par, Default::default())
+            .or(factor
+                .symbolic
+                .factorize_numeric_ldlt_scratch::<f64>(par, Default::default()));
+        scratch_of(&mut factor.scratch, req)?.fill(std::mem::MaybeUninit::new(0));
+        Ok(factor)
     }
 
     /// Copies `values` (in the caller's pattern) into elimination order.
@@ -231,11 +241,6 @@ impl SparseFactor {
         } else {
             faer::Par::Seq
         }
-    }
-
-    /// Whether the numeric factorisation runs on one thread (leaving the other cores free).
-    pub fn is_sequential(&self) -> bool {
-        matches!(self.parallelism(), faer::Par::Seq)
     }
 
     /// Number of stored values in the factor (a measure of fill-in and memory).
@@ -595,6 +600,16 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
         }
     }
     partial.iter().sum::<f64>() + tail
+}
+
+/// `n` zeros in memory that has been written. A freshly allocated zero vector is usually mapped
+/// lazily, page by page at first write: that would land in the first numeric factorisation
+/// (7 ms of 21 at 12k tets, 11 of 33 at 18k), i.e. in the first Newton iteration, instead of
+/// in the analysis that sizes the factor.
+fn written_zeros(n: usize) -> Vec<f64> {
+    let mut values = Vec::with_capacity(n);
+    values.resize(n, 0.0);
+    values
 }
 
 /// Approximate-minimum-degree elimination order of a symmetric pattern (`order[k]` = unknown

@@ -3,7 +3,7 @@
 
 use crate::assembly::Assembler;
 use crate::cables::{embed, CableSpec, PointPlacement};
-use crate::energy::elastic::PressureCompliance;
+use crate::energy::elastic::{PressureCompliance, PressureIterates, PressureLinearisations};
 use crate::energy::{CableTerm, ElasticTerm, GravityTerm, HessianMode, NodalForceTerm, Term};
 pub use crate::energy::{Formulation as ElementFormulation, PressureMass};
 use crate::error::{check_finite, Error, Result};
@@ -439,7 +439,10 @@ impl Model {
         let mut problem = System::new(self, full_load, prescribed, None, options);
         // Only the prescribed displacements are scaled by the load factor: the initial guess is
         // kept as given for the free DOFs, which is what warm starts need.
-        let report = newton::solve(&mut problem, &mut z, options)?;
+        // The Newton loop runs on a worker of the thread pool. On the calling thread, its
+        // single-threaded factorisations left both workers asleep for 15 ms at a time, and every
+        // element pass after one was about 1.5x slower (12k-tet cantilever, 2 cores).
+        let report = rayon::scope(|_| newton::solve(&mut problem, &mut z, options))?;
         let full_load = std::mem::take(&mut problem.full_load);
         drop(problem);
         // Reaction = internal force minus applied load at the supports, so that the reactions
@@ -729,7 +732,8 @@ impl Model {
                     options,
                 );
                 problem.model.cables.begin_step(h, &z);
-                let outcome = newton::solve(&mut problem, &mut trial, &step_options);
+                let outcome =
+                    rayon::scope(|_| newton::solve(&mut problem, &mut trial, &step_options));
                 problem.model.cables.end_step();
                 drop(problem);
                 match outcome {
@@ -853,8 +857,10 @@ struct System<'a> {
     step: Option<StepTerms>,
     /// [`NewtonOptions::pressure_iterates`] (standard formulation only).
     pressure_iterates: bool,
-    /// The element pressures linearised at the state the last direction was computed at.
-    linearised_pressures: Vec<crate::energy::elastic::LinearisedPressure>,
+    /// The element pressures linearised at the current iterate, when `linearised_at_iterate`
+    /// (swapped in from those the Hessian pass there recorded).
+    linearised_pressures: PressureLinearisations,
+    linearised_at_iterate: bool,
     /// The element pressure iterates of the current iterate (the model's elastic term holds
     /// those of the state last moved to with `trial_iterates`).
     pressure_base: Vec<f64>,
@@ -976,7 +982,8 @@ impl<'a> System<'a> {
             prescribed,
             step,
             pressure_iterates,
-            linearised_pressures: Vec::new(),
+            linearised_pressures: PressureLinearisations::new(0),
+            linearised_at_iterate: false,
             pressure_base: Vec::new(),
             hessian_prepared: false,
         }
@@ -990,6 +997,15 @@ impl System<'_> {
 
     fn is_mixed(&self) -> bool {
         matches!(self.model.formulation, Formulation::Mixed { .. })
+    }
+
+    /// Takes the pressure linearisation the last Hessian pass recorded as that of the current
+    /// iterate (the caller knows the pass was there).
+    fn take_recorded_linearisation(&mut self) {
+        if let Some(iterates) = &mut self.model.elastic.pressure_iterates {
+            std::mem::swap(&mut self.linearised_pressures, &mut iterates.recorded);
+            self.linearised_at_iterate = true;
+        }
     }
 
     fn free_values(&self, z: &[f64]) -> Vec<f64> {
@@ -1138,6 +1154,7 @@ impl NewtonProblem for System<'_> {
                 Some(mode),
                 &mut eval,
             );
+            self.take_recorded_linearisation();
         }
         self.hessian_prepared = false;
         if let Some(step) = &self.step {
@@ -1146,27 +1163,12 @@ impl NewtonProblem for System<'_> {
         timings.assembly += t0.elapsed().as_secs_f64();
         let pattern = self.model.assembler.pattern();
         let t0 = Instant::now();
-        let (factor, elastic) = (&mut self.model.factor, &self.model.elastic);
-        let beside = self.pressure_iterates && factor.is_sequential();
-        let mut factorise = || {
-            let t0 = Instant::now();
-            let ok = match elastic.formulation {
-                ElementFormulation::Standard => factor.factor_llt(pattern, &eval.hessian),
-                ElementFormulation::Mixed { .. } => factor.factor_ldlt(pattern, &eval.hessian),
-            };
-            (ok, t0.elapsed().as_secs_f64())
+        let factor = &mut self.model.factor;
+        let ok = match self.model.elastic.formulation {
+            ElementFormulation::Standard => factor.factor_llt(pattern, &eval.hessian),
+            ElementFormulation::Mixed { .. } => factor.factor_ldlt(pattern, &eval.hessian),
         };
-        // The pressure linearisation at z runs on the core the (single-threaded) factorisation
-        // leaves idle.
-        let ((ok, seconds), linearised) = if beside {
-            rayon::join(factorise, || elastic.linearised_pressures(z))
-        } else if self.pressure_iterates {
-            (factorise(), elastic.linearised_pressures(z))
-        } else {
-            (factorise(), Vec::new())
-        };
-        timings.assembly += t0.elapsed().as_secs_f64() - seconds;
-        self.linearised_pressures = linearised;
+        let seconds = t0.elapsed().as_secs_f64();
         self.model.hessian_scratch = eval;
         let ok = ok?;
         timings.factorization += seconds;
@@ -1205,7 +1207,13 @@ impl NewtonProblem for System<'_> {
     fn start_iterates(&mut self, z: &[f64]) {
         if self.pressure_iterates {
             self.pressure_base = self.model.elastic.pressures_at(z);
-            self.model.elastic.pressure_iterates = Some(self.pressure_base.clone());
+            self.model.elastic.pressure_iterates =
+                Some(PressureIterates::new(self.pressure_base.clone()));
+            // Swapped with the recorded ones: both sized for every tet.
+            if self.linearised_pressures.len() != self.pressure_base.len() {
+                self.linearised_pressures = PressureLinearisations::new(self.pressure_base.len());
+            }
+            self.linearised_at_iterate = false;
         }
     }
 
@@ -1215,10 +1223,13 @@ impl NewtonProblem for System<'_> {
             for (&full, di) in self.model.assembler.full_of_free().iter().zip(d) {
                 dz[full] = *di;
             }
-            if self.linearised_pressures.is_empty() {
+            if !self.linearised_at_iterate {
                 self.linearised_pressures = self.model.elastic.linearised_pressures(z);
+                self.linearised_at_iterate = true;
             }
-            self.model.elastic.pressure_iterates = Some(self.pressure_base.clone());
+            if let Some(iterates) = &mut self.model.elastic.pressure_iterates {
+                iterates.values.clone_from(&self.pressure_base);
+            }
             self.model
                 .elastic
                 .advance_pressures(&self.linearised_pressures, &dz, t);
@@ -1226,9 +1237,14 @@ impl NewtonProblem for System<'_> {
     }
 
     fn commit_iterates(&mut self) {
-        if let Some(pressures) = &self.model.elastic.pressure_iterates {
-            self.pressure_base.clone_from(pressures);
-            self.linearised_pressures.clear();
+        if let Some(iterates) = &self.model.elastic.pressure_iterates {
+            self.pressure_base.clone_from(&iterates.values);
+            self.linearised_at_iterate = false;
+            // Accepted where the line search built the next Hessian: that pass recorded the
+            // linearisation at the new iterate.
+            if self.hessian_prepared {
+                self.take_recorded_linearisation();
+            }
         }
     }
 

@@ -5,7 +5,7 @@ mod common;
 
 use common::{check_gradient, check_jacobian, Rng};
 use sorofem_core::assembly::Assembler;
-use sorofem_core::energy::elastic::PressureCompliance;
+use sorofem_core::energy::elastic::{PressureCompliance, PressureIterates};
 use sorofem_core::energy::{
     ElasticTerm, Formulation, GravityTerm, HessianMode, PressureMass, Term,
 };
@@ -338,19 +338,35 @@ fn pressure_iterates_are_consistent_and_linearise_the_volumetric_constraint() {
     let fixed = vec![false; 3 * n];
     let assembler = Assembler::new(&fixed, &[&term]);
     let exact = assembler.evaluate(&[&term], &z, false, Some(HessianMode::Exact));
-    term.pressure_iterates = Some(term.pressures_at(&z));
+    term.pressure_iterates = Some(PressureIterates::new(term.pressures_at(&z)));
     let consistent = assembler.evaluate(&[&term], &z, false, Some(HessianMode::Exact));
     let scale = exact.hessian.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     for (a, b) in exact.hessian.iter().zip(&consistent.hessian) {
         assert!((a - b).abs() <= 1e-12 * scale, "{a} vs {b}");
     }
-    let start = term.pressure_iterates.clone().unwrap();
+    let start = term.pressure_iterates.as_ref().unwrap().values.clone();
     let linearised = term.linearised_pressures(&z);
+    // The Hessian pass recorded the same linearisation (Newton solves use that one).
+    let recorded = &term.pressure_iterates.as_ref().unwrap().recorded;
+    for e in 0..mesh.n_tets() {
+        let (a, b) = (recorded.get(e), linearised.get(e));
+        let close = |x: f64, y: f64| (x - y).abs() <= 1e-12 * y.abs().max(1.0);
+        assert!(
+            close(a.value, b.value),
+            "tet {e}: {} vs {}",
+            a.value,
+            b.value
+        );
+        for (x, y) in a.gradient.iter().zip(&b.gradient) {
+            assert!(close(*x, *y), "tet {e}: {x} vs {y}");
+        }
+    }
     term.advance_pressures(&linearised, &dz, 1.0);
     let moved: Vec<f64> = term
         .pressure_iterates
         .as_ref()
         .unwrap()
+        .values
         .iter()
         .zip(&start)
         .map(|(p, p0)| p - p0)
@@ -361,12 +377,13 @@ fn pressure_iterates_are_consistent_and_linearise_the_volumetric_constraint() {
     };
     check_jacobian("pressure update", &[0.0], 1e-6, along, &moved, 1e-6, 1e-9);
     // Half a step moves them half the way.
-    term.pressure_iterates = Some(start.clone());
+    term.pressure_iterates = Some(PressureIterates::new(start.clone()));
     term.advance_pressures(&linearised, &dz, 0.5);
     for ((p, p0), m) in term
         .pressure_iterates
         .as_ref()
         .unwrap()
+        .values
         .iter()
         .zip(&start)
         .zip(&moved)

@@ -19,6 +19,7 @@ use super::{
 use crate::material::{NeoHookean, Volumetric};
 use crate::mesh::TetMesh;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 
 /// The pressure mass matrix `M_p` of the mixed formulation.
@@ -40,12 +41,91 @@ pub enum Formulation {
     },
 }
 
-/// One tet's pressure `lambda c(J)` (Pa) at a state and its gradient with respect to the tet's
-/// four nodal displacements (Pa/m): `lambda c'(J) J F^{-T} g_a`.
-#[derive(Clone, Copy, Debug)]
+/// One tet's pressure `lambda c(J)` (Pa) at a state and its derivative with respect to the
+/// displacement gradient `H = F - I`: `dp/dH = lambda c'(J) J F^{-T}` (Pa, row-major), so that
+/// `dp = dp/dH : dH` with `dH = sum_a du_a g_a^T`.
+#[derive(Clone, Copy, Debug, Default)]
 pub struct LinearisedPressure {
     pub value: f64,
-    pub gradient: [[f64; 3]; 4],
+    pub gradient: [f64; 9],
+}
+
+impl LinearisedPressure {
+    /// From the quantities an element kernel has at hand: `lambda` (Pa), `F^{-T}`, `J` and
+    /// `(c(J), c'(J))`. An inverted tet (`J <= 0`) gets a NaN value, which
+    /// [`ElasticTerm::advance_pressures`] leaves alone.
+    fn new(lambda: f64, gt: &crate::material::Mat3, j: f64, c: f64, dc: f64) -> Self {
+        if !(j > 0.0) {
+            return LinearisedPressure {
+                value: f64::NAN,
+                gradient: [0.0; 9],
+            };
+        }
+        let scale = lambda * dc * j;
+        LinearisedPressure {
+            value: lambda * c,
+            gradient: std::array::from_fn(|k| scale * gt[(k / 3, k % 3)]),
+        }
+    }
+}
+
+/// [`LinearisedPressure`]s of all tets at one state. The standard element kernel writes the
+/// entry of its tet whenever it builds a Hessian with pressure iterates (it has `F^{-T}`, `J` and
+/// `c(J)` at hand then), so a Newton step's pressure update needs no element pass of its own;
+/// the cells are atomic because the assembler's threads write them, each tet from one thread.
+pub struct PressureLinearisations {
+    cells: Vec<[AtomicU64; 10]>,
+}
+
+impl PressureLinearisations {
+    pub fn new(n_tets: usize) -> Self {
+        PressureLinearisations {
+            cells: (0..n_tets)
+                .map(|_| std::array::from_fn(|_| AtomicU64::new(0)))
+                .collect(),
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.cells.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.cells.is_empty()
+    }
+
+    pub fn get(&self, e: usize) -> LinearisedPressure {
+        let cell = &self.cells[e];
+        let value = |k: usize| f64::from_bits(cell[k].load(Ordering::Relaxed));
+        LinearisedPressure {
+            value: value(0),
+            gradient: std::array::from_fn(|k| value(k + 1)),
+        }
+    }
+
+    fn set(&self, e: usize, linearised: &LinearisedPressure) {
+        let cell = &self.cells[e];
+        cell[0].store(linearised.value.to_bits(), Ordering::Relaxed);
+        for (slot, v) in cell[1..].iter().zip(&linearised.gradient) {
+            slot.store(v.to_bits(), Ordering::Relaxed);
+        }
+    }
+}
+
+/// The element pressures a Newton solve builds the standard formulation's Hessians with.
+pub struct PressureIterates {
+    /// `p_e` (Pa), one per tet.
+    pub values: Vec<f64>,
+    /// Written by every Hessian built with these iterates: the pressures linearised at the
+    /// state of the last one.
+    pub recorded: PressureLinearisations,
+}
+
+impl PressureIterates {
+    pub fn new(values: Vec<f64>) -> Self {
+        let recorded = PressureLinearisations::new(values.len());
+        PressureIterates { values, recorded }
+    }
 }
 
 /// Elastic energy of all tets. `mu` and `lambda` are per tet (Pa).
@@ -60,7 +140,7 @@ pub struct ElasticTerm {
     /// `p_e = lambda c(J_e)`; energy and gradient are unchanged. Newton solves set them (see
     /// [`ElasticTerm::pressures_at`], [`ElasticTerm::advance_pressures`]); `None` gives the
     /// exact Hessian.
-    pub pressure_iterates: Option<Vec<f64>>,
+    pub pressure_iterates: Option<PressureIterates>,
 }
 
 impl ElasticTerm {
@@ -104,24 +184,16 @@ impl ElasticTerm {
             .collect()
     }
 
-    /// Each tet's pressure `lambda c(J)` and its gradient with respect to the tet's nodal
-    /// displacements at the full DOF vector `z`: what [`ElasticTerm::advance_pressures`] moves
-    /// the pressure iterates with. Standard formulation.
-    pub fn linearised_pressures(&self, z: &[f64]) -> Vec<LinearisedPressure> {
-        (0..self.mesh.n_tets())
-            .into_par_iter()
-            .map(|e| {
-                let (gt, j, c, dc) = self.volume_state(e, z);
-                let lambda = self.lambda[e];
-                // dJ/du_a = J F^{-T} g_a.
-                let scale = lambda * dc * j;
-                let g = self.mesh.shape_gradients(e);
-                LinearisedPressure {
-                    value: if j > 0.0 { lambda * c } else { f64::NAN },
-                    gradient: std::array::from_fn(|a| (gt * g[a] * scale).into()),
-                }
-            })
-            .collect()
+    /// Each tet's pressure `lambda c(J)` and its derivative at the full DOF vector `z`: what
+    /// [`ElasticTerm::advance_pressures`] moves the pressure iterates with. Standard
+    /// formulation. (Newton solves get these recorded by the Hessian pass instead.)
+    pub fn linearised_pressures(&self, z: &[f64]) -> PressureLinearisations {
+        let linearised = PressureLinearisations::new(self.mesh.n_tets());
+        (0..self.mesh.n_tets()).into_par_iter().for_each(|e| {
+            let (gt, j, c, dc) = self.volume_state(e, z);
+            linearised.set(e, &LinearisedPressure::new(self.lambda[e], &gt, j, c, dc));
+        });
+        linearised
     }
 
     /// Moves the pressure iterates the step `t dz` (full DOFs) from the state `linearised`
@@ -132,27 +204,26 @@ impl ElasticTerm {
     /// the standard energy, so the solution is the same; the iterates differ from `lambda c(J)`
     /// only while the linearised volume change is off, as when a rotation makes the
     /// displacement update stretch elements spuriously.
-    pub fn advance_pressures(&mut self, linearised: &[LinearisedPressure], dz: &[f64], t: f64) {
-        let Some(mut pressures) = self.pressure_iterates.take() else {
+    pub fn advance_pressures(&mut self, linearised: &PressureLinearisations, dz: &[f64], t: f64) {
+        let Some(mut iterates) = self.pressure_iterates.take() else {
             return;
         };
-        let tets = self.mesh.tets();
-        pressures
+        iterates
+            .values
             .par_iter_mut()
-            .zip(linearised)
-            .zip(tets)
-            .for_each(|((p, linear), tet)| {
+            .enumerate()
+            .for_each(|(e, p)| {
+                let linear = linearised.get(e);
+                let dh = self.displacement_gradient_of(e, dz);
                 let mut full = linear.value;
-                for (gradient, &node) in linear.gradient.iter().zip(tet) {
-                    for k in 0..3 {
-                        full += gradient[k] * dz[3 * node + k];
-                    }
+                for (k, gradient) in linear.gradient.iter().enumerate() {
+                    full += gradient * dh[(k / 3, k % 3)];
                 }
                 if full.is_finite() {
                     *p += t * (full - *p);
                 }
             });
-        self.pressure_iterates = Some(pressures);
+        self.pressure_iterates = Some(iterates);
     }
 
     /// `(F^{-T}, J, c(J), c'(J))` of tet `e` at the full DOF vector `z`; `J <= 0` (and the rest
@@ -215,10 +286,14 @@ impl ElasticTerm {
         if let Some(hess) = hess {
             let (gt, j) = (r.gt, r.j);
             let (c, dc, d2c) = r.measure;
-            let pressure = self
-                .pressure_iterates
-                .as_ref()
-                .map_or(material.lambda * c, |p| p[e]);
+            let pressure = match &self.pressure_iterates {
+                Some(iterates) => {
+                    let linearised = LinearisedPressure::new(material.lambda, &gt, j, c, dc);
+                    iterates.recorded.set(e, &linearised);
+                    iterates.values[e]
+                }
+                None => material.lambda * c,
+            };
             let dh = pressure * dc;
             let d2h = material.lambda * dc * dc + pressure * d2c;
             let (mu, alpha, beta) = (material.mu, material.mu - dh * j, d2h * j * j + dh * j);
