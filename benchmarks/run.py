@@ -123,22 +123,34 @@ def _safe(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
 
 
-def repeat_timed(fn: Callable[[], Any], budget_s: float = 2.0, max_repeats: int = 7) -> dict[str, Any]:
+def repeat_timed(
+    fn: Callable[[], Any],
+    budget_s: float = 2.0,
+    max_repeats: int = 7,
+    after: Callable[[Any], Any] | None = None,
+) -> dict[str, Any]:
     """Call ``fn`` once, then again while the time spent is under ``budget_s``.
 
-    Returns the wall times, the first (cold) one, the median and the result of the median run.
+    ``after``, when given, is called (untimed) with each run's result right after it: for
+    measurements that must be paired with that run (taken under the same machine state).
+
+    Returns the wall times, the first (cold) one, the median, the result of the median run and
+    the ``after`` outputs of every run.
     """
     times: list[float] = []
     results: list[Any] = []
+    afterwards: list[Any] = []
     spent = 0.0
     while len(times) < max_repeats and (not times or spent + times[-1] < budget_s):
         t0 = time.perf_counter()
         results.append(fn())
         times.append(time.perf_counter() - t0)
         spent += times[-1]
+        if after is not None:
+            afterwards.append(after(results[-1]))
     order = sorted(range(len(times)), key=times.__getitem__)
     mid = order[(len(order) - 1) // 2]
-    return {"times": times, "first": times[0], "median": times[mid], "result": results[mid]}
+    return {"times": times, "first": times[0], "median": times[mid], "result": results[mid], "after": afterwards}
 
 
 def box_points_tets(size: tuple[float, float, float], cells: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray, str]:
@@ -197,11 +209,15 @@ def _mib(r: dict[str, Any]) -> str:
 def _per_iteration_ratio(r: dict[str, Any]) -> float | None:
     """(time per Newton iteration) / (time of one bare numeric factorisation).
 
-    A bare factorisation is timed on its own after the solve (median of five, nothing beside it:
-    `Model.time_factorization`), not taken from the solve's own timings. Whatever else an
-    iteration pays for (a failed factorisation and a second, projected Hessian) counts against
-    it.
+    A bare factorisation is timed on its own right after each solve (median of three, nothing
+    beside it: `Model.time_factorization`), not taken from the solve's own timings; the ratio is
+    the median over the repeats of each solve's ratio to its own bare factorisation, so that a
+    drift of the machine's speed between the solves and the bare timing does not enter it.
+    Whatever else an iteration pays for (a failed factorisation and a second, projected Hessian)
+    counts against it.
     """
+    if r.get("per_iteration_ratios"):
+        return statistics.median(r["per_iteration_ratios"])
     t = r.get("timings") or {}
     bare = r.get("bare_factorization_seconds")
     if not bare or not r.get("iterations") or not t.get("total"):
@@ -230,8 +246,10 @@ TABLES["static"] = Table(
     "the model, i.e. the symbolic analysis, included), median of the repeats; phases are the solver's "
     "own `report.timings` of that run, in ms. fact. = numeric factorisations (of which failed: the "
     "exact Hessian was indefinite and the projected one was factorised as well). bare fact. = one "
-    "numeric factorisation of the Hessian at the solution timed alone after the solve (median of "
-    "five); t/it / bare fact. = time per Newton iteration over it; total / all fact. = solve time "
+    "numeric factorisation of the Hessian at the solution timed alone right after each solve (median "
+    "of three; the median over the repeats is shown); t/it / bare fact. = time per Newton "
+    "iteration (report total / iterations) over it, the median over the repeats of each solve's "
+    "ratio to its own bare factorisation; total / all fact. = solve time "
     "over the time of all factorisations in the solve, failed ones included. "
     "w_tip = mean z-displacement of the x = L face.",
     (
@@ -462,11 +480,22 @@ def sorofem_cantilever(
         except sf.ConvergenceError as err:
             return body, err
 
-    timed = repeat_timed(run, budget_s=2.0 if mesh.n_tets < 50_000 else 0.0)
+    def bare_factorization(run_result: Any) -> tuple[float, float] | None:
+        """This solve's bare factorisation (s) and its time per iteration over it."""
+        body, result = run_result
+        if isinstance(result, Exception):
+            return None
+        bare = statistics.median(body._core_model().time_factorization(3))
+        report = result.report
+        return bare, report.timings["total"] / report.iterations / bare
+
+    timed = repeat_timed(run, budget_s=2.0 if mesh.n_tets < 50_000 else 0.0, after=bare_factorization)
     body, result = timed["result"]
     row = _sorofem_row(mesh, body, result, timed)
-    if not isinstance(result, Exception):
-        row["bare_factorization_seconds"] = statistics.median(body._core_model().time_factorization(5))
+    paired = [p for p in timed["after"] if p is not None]
+    if paired:
+        row["bare_factorization_seconds"] = statistics.median(p[0] for p in paired)
+        row["per_iteration_ratios"] = [p[1] for p in paired]
     row["poisson_ratio"] = params["poisson_ratio"]
     if not isinstance(result, Exception):
         row["tip_deflection"] = _tip_deflection(mesh.points, result.displacement, length)
