@@ -654,62 +654,21 @@ fn oom() -> Error {
 mod tests {
     use super::*;
 
-    fn laplacian_1d(n: usize, shift: f64) -> (LowerPattern, Vec<f64>) {
+    /// The Laplacian of a `dims[0] x dims[1] x dims[2]` grid (nearest neighbours: -1; diagonal:
+    /// 2 per dimension longer than one, plus `shift`).
+    fn grid_laplacian(dims: [usize; 3], shift: f64) -> (LowerPattern, Vec<f64>) {
+        let n = dims.iter().product();
+        let index = |i: usize, j: usize, l: usize| (i * dims[1] + j) * dims[2] + l;
+        let diagonal = 2.0 * dims.iter().filter(|&&d| d > 1).count() as f64 + shift;
         let mut col_ptr = vec![0];
         let mut row_idx = Vec::new();
         let mut values = Vec::new();
-        for c in 0..n {
-            row_idx.push(c);
-            values.push(2.0 + shift);
-            if c + 1 < n {
-                row_idx.push(c + 1);
-                values.push(-1.0);
-            }
-            col_ptr.push(row_idx.len());
-        }
-        (
-            LowerPattern {
-                n,
-                col_ptr,
-                row_idx,
-            },
-            values,
-        )
-    }
-
-    #[test]
-    fn llt_solves_and_detects_indefinite() {
-        let (p, v) = laplacian_1d(50, 0.0);
-        let mut f = SparseFactor::analyse(&p).unwrap();
-        assert!(f.factor_llt(&p, &v).unwrap());
-        let x: Vec<f64> = (0..50).map(|i| (i as f64).sin()).collect();
-        let mut b = p.symmetric_matvec(&v, &x);
-        f.solve_in_place(&mut b);
-        let err = b
-            .iter()
-            .zip(&x)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max);
-        assert!(err < 1e-10, "{err}");
-        let (_, v_indef) = laplacian_1d(50, -3.0);
-        assert!(!f.factor_llt(&p, &v_indef).unwrap());
-    }
-
-    /// The 7-point Laplacian (plus `shift` on the diagonal) of a k x k x k grid: large enough
-    /// for a supernodal factor whose solves are split between two threads.
-    fn laplacian_3d(k: usize, shift: f64) -> (LowerPattern, Vec<f64>) {
-        let n = k * k * k;
-        let index = |i: usize, j: usize, l: usize| (i * k + j) * k + l;
-        let mut col_ptr = vec![0];
-        let mut row_idx = Vec::new();
-        let mut values = Vec::new();
-        for i in 0..k {
-            for j in 0..k {
-                for l in 0..k {
-                    let c = index(i, j, l);
-                    let mut entries = vec![(c, 6.0 + shift)];
+        for i in 0..dims[0] {
+            for j in 0..dims[1] {
+                for l in 0..dims[2] {
+                    let mut entries = vec![(index(i, j, l), diagonal)];
                     for (di, dj, dl) in [(1, 0, 0), (0, 1, 0), (0, 0, 1)] {
-                        if i + di < k && j + dj < k && l + dl < k {
+                        if i + di < dims[0] && j + dj < dims[1] && l + dl < dims[2] {
                             entries.push((index(i + di, j + dj, l + dl), -1.0));
                         }
                     }
@@ -732,9 +691,32 @@ mod tests {
         )
     }
 
+    /// `max |a - b|`.
+    fn max_difference(a: &[f64], b: &[f64]) -> f64 {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max)
+    }
+
+    #[test]
+    fn llt_solves_and_detects_indefinite() {
+        let (p, v) = grid_laplacian([50, 1, 1], 0.0);
+        let mut f = SparseFactor::analyse(&p).unwrap();
+        assert!(f.factor_llt(&p, &v).unwrap());
+        let x: Vec<f64> = (0..50).map(|i| (i as f64).sin()).collect();
+        let mut b = p.symmetric_matvec(&v, &x);
+        f.solve_in_place(&mut b);
+        let err = max_difference(&b, &x);
+        assert!(err < 1e-10, "{err}");
+        let (_, v_indef) = grid_laplacian([50, 1, 1], -3.0);
+        assert!(!f.factor_llt(&p, &v_indef).unwrap());
+    }
+
     #[test]
     fn split_supernodal_solves_match_the_matrix() {
-        let (p, v) = laplacian_3d(14, 0.1);
+        // 14^3 unknowns: a supernodal factor whose solves are split between two threads.
+        let (p, v) = grid_laplacian([14, 14, 14], 0.1);
         let mut f = SparseFactor::analyse(&p).unwrap();
         let split = f.split.as_ref().expect("a supernodal factor");
         assert!(!split.groups[1].is_empty(), "the solves are split");
@@ -743,11 +725,7 @@ mod tests {
         assert!(f.factor_llt(&p, &v).unwrap());
         let mut solved = b.clone();
         f.solve_in_place(&mut solved);
-        let err = solved
-            .iter()
-            .zip(&x)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max);
+        let err = max_difference(&solved, &x);
         assert!(err < 1e-11, "{err}");
     }
 

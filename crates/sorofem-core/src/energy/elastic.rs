@@ -44,7 +44,7 @@ pub enum Formulation {
 /// One tet's pressure `lambda c(J)` (Pa) at a state and its derivative with respect to the
 /// displacement gradient `H = F - I`: `dp/dH = lambda c'(J) J F^{-T}` (Pa, row-major), so that
 /// `dp = dp/dH : dH` with `dH = sum_a du_a g_a^T`.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug)]
 pub struct LinearisedPressure {
     pub value: f64,
     pub gradient: [f64; 9],
