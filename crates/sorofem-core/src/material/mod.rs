@@ -3,8 +3,10 @@
 //! Flattening convention for 3x3 tensors: entry (i, j) is component `3 i + j` of a 9-vector, so
 //! a fourth-order tangent dP/dF is a 9x9 matrix `A[3i+j, 3k+l] = dP_ij / dF_kl`.
 
+pub mod law;
 pub mod neo_hookean;
 
+pub use law::{Hyperelastic, RestParamGradient};
 pub use neo_hookean::{NeoHookean, Volumetric};
 
 use nalgebra::{Matrix3, SMatrix, SymmetricEigen};
