@@ -1,7 +1,7 @@
 //! The one error type of the core. Every message names the parameter, what was expected and what
 //! was given, so that the Python layer can show it unchanged.
 
-use crate::newton::SolveReport;
+use crate::report::SolveReport;
 use std::fmt;
 
 pub type Result<T> = std::result::Result<T, Error>;

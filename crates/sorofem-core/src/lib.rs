@@ -20,6 +20,7 @@ pub mod material;
 pub mod mesh;
 pub mod model;
 pub mod newton;
+pub mod report;
 pub mod sensitivity;
 
 pub use error::{Error, Result};
@@ -27,4 +28,4 @@ pub use mesh::{Orientation, TetMesh};
 pub use model::{
     Damping, Formulation, Loads, Material, Model, PressureMass, Solution, SolveOptions, Trajectory,
 };
-pub use newton::SolveReport;
+pub use report::{SolveReport, Timings};

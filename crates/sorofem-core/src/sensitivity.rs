@@ -38,36 +38,6 @@ impl ParamVector {
 }
 
 impl Model {
-    /// Seconds of each of `repeats` numeric factorisations of the exact Hessian at the last
-    /// static solution (the rest state before any solve), with nothing running beside them: the
-    /// bare cost a Newton iteration is measured against. A diagnostic for benchmarks.
-    pub fn time_factorization(&mut self, repeats: usize) -> Result<Vec<f64>> {
-        let z = match &self.last_state {
-            Some((z, _)) => z.clone(),
-            None => vec![0.0; self.assembler.n_full()],
-        };
-        let eval = self
-            .assembler
-            .evaluate(&self.terms(), &z, false, Some(HessianMode::Exact));
-        let pattern = self.assembler.pattern();
-        self.factor_at_solution = false;
-        // On a pool worker, as in a solve (faer's parallel factorisation of large factors
-        // pays for every task it starts from outside the pool).
-        let (factor, formulation) = (&mut self.factor, &self.formulation);
-        rayon::scope(|_| {
-            (0..repeats)
-                .map(|_| {
-                    let t0 = std::time::Instant::now();
-                    match formulation {
-                        Formulation::Standard => factor.factor_llt(pattern, &eval.hessian)?,
-                        Formulation::Mixed { .. } => factor.factor_ldlt(pattern, &eval.hessian)?,
-                    };
-                    Ok(t0.elapsed().as_secs_f64())
-                })
-                .collect()
-        })
-    }
-
     /// Factors the exact Hessian at the last static solution (once per solution).
     fn prepare_sensitivities(&mut self) -> Result<()> {
         let Some((z, _)) = &self.last_state else {
@@ -80,17 +50,12 @@ impl Model {
         if self.factor_at_solution {
             return Ok(());
         }
-        let eval = self
-            .assembler
-            .evaluate(&self.terms(), z, false, Some(HessianMode::Exact));
-        let ok = match self.formulation {
-            Formulation::Standard => self
-                .factor
-                .factor_llt(self.assembler.pattern(), &eval.hessian)?,
-            Formulation::Mixed { .. } => self
-                .factor
-                .factor_ldlt(self.assembler.pattern(), &eval.hessian)?,
-        };
+        let eval =
+            self.assembler
+                .evaluate(&self.terms.internal(), z, false, Some(HessianMode::Exact));
+        let ok = self
+            .factor
+            .factor(self.assembler.pattern(), &eval.hessian)?;
         if !ok {
             return Err(Error::LinearSolver {
                 message: "the Hessian at the solution is singular or indefinite (an unstable equilibrium?): \
@@ -108,16 +73,17 @@ impl Model {
         let (z, loads) = self.last_state.as_ref().expect("prepared");
         let m = self.mesh.n_tets();
         let mut out = ParamVector::zeros(m, self.n_cables());
-        let s = self.elastic.stencil_size();
+        let s = self.terms.elastic.stencil_size();
         let (mut dofs, mut local, mut local_w) = (vec![0; s], vec![0.0; s], vec![0.0; s]);
         let (mut d_mu, mut d_lambda) = (vec![0.0; s], vec![0.0; s]);
         for e in 0..m {
-            self.elastic.element_dofs(e, &mut dofs);
+            self.terms.elastic.element_dofs(e, &mut dofs);
             for a in 0..s {
                 local[a] = z[dofs[a]];
                 local_w[a] = w[dofs[a]];
             }
-            self.elastic
+            self.terms
+                .elastic
                 .element_param_derivatives(e, &local, &mut d_mu, &mut d_lambda);
             out.mu[e] = d_mu.iter().zip(&local_w).map(|(a, b)| a * b).sum();
             out.lambda[e] = d_lambda.iter().zip(&local_w).map(|(a, b)| a * b).sum();
@@ -136,17 +102,18 @@ impl Model {
                 out.gravity[k] -= mass * w[3 * (n + i) + k];
             }
         }
-        let s = self.cables.stencil_size();
+        let s = self.terms.cables.stencil_size();
         let (mut dofs, mut local, mut d_alpha, mut d_k) =
             (vec![0; s], vec![0.0; s], vec![0.0; s], vec![0.0; s]);
-        for e in 0..self.cables.n_elements() {
-            self.cables.element_dofs(e, &mut dofs);
+        for e in 0..self.terms.cables.n_elements() {
+            self.terms.cables.element_dofs(e, &mut dofs);
             for a in 0..s {
                 local[a] = z[dofs[a]];
             }
-            self.cables
+            self.terms
+                .cables
                 .segment_param_derivatives(e, &local, &mut d_alpha, &mut d_k);
-            let c = self.cables.cable_of(e);
+            let c = self.terms.cables.cable_of(e);
             for a in 0..s {
                 out.cable_actuation[c] += d_alpha[a] * w[dofs[a]];
                 out.cable_stiffness[c] += d_k[a] * w[dofs[a]];
@@ -160,7 +127,7 @@ impl Model {
         let (z, loads) = self.last_state.as_ref().expect("prepared");
         let mut out = vec![0.0; z.len()];
         let m = self.mesh.n_tets();
-        let s = self.elastic.stencil_size();
+        let s = self.terms.elastic.stencil_size();
         let (mut dofs, mut local) = (vec![0; s], vec![0.0; s]);
         let (mut d_mu, mut d_lambda) = (vec![0.0; s], vec![0.0; s]);
         for e in 0..m {
@@ -169,11 +136,12 @@ impl Model {
                 delta.lambda.get(e).copied().unwrap_or(0.0),
             );
             if dm != 0.0 || dl != 0.0 {
-                self.elastic.element_dofs(e, &mut dofs);
+                self.terms.elastic.element_dofs(e, &mut dofs);
                 for a in 0..s {
                     local[a] = z[dofs[a]];
                 }
-                self.elastic
+                self.terms
+                    .elastic
                     .element_param_derivatives(e, &local, &mut d_mu, &mut d_lambda);
                 for a in 0..s {
                     out[dofs[a]] += dm * d_mu[a] + dl * d_lambda[a];
@@ -194,11 +162,11 @@ impl Model {
                 out[3 * (n + i) + k] -= mass * delta.gravity[k];
             }
         }
-        let s = self.cables.stencil_size();
+        let s = self.terms.cables.stencil_size();
         let (mut dofs, mut local, mut d_alpha, mut d_k) =
             (vec![0; s], vec![0.0; s], vec![0.0; s], vec![0.0; s]);
-        for e in 0..self.cables.n_elements() {
-            let c = self.cables.cable_of(e);
+        for e in 0..self.terms.cables.n_elements() {
+            let c = self.terms.cables.cable_of(e);
             let (da, dk) = (
                 delta.cable_actuation.get(c).copied().unwrap_or(0.0),
                 delta.cable_stiffness.get(c).copied().unwrap_or(0.0),
@@ -206,11 +174,12 @@ impl Model {
             if da == 0.0 && dk == 0.0 {
                 continue;
             }
-            self.cables.element_dofs(e, &mut dofs);
+            self.terms.cables.element_dofs(e, &mut dofs);
             for a in 0..s {
                 local[a] = z[dofs[a]];
             }
-            self.cables
+            self.terms
+                .cables
                 .segment_param_derivatives(e, &local, &mut d_alpha, &mut d_k);
             for a in 0..s {
                 out[dofs[a]] += da * d_alpha[a] + dk * d_k[a];

@@ -276,6 +276,30 @@ impl Term for CableTerm {
 }
 
 impl CableTerm {
+    /// The position (m) of every point of every cable at the full DOF vector `z`.
+    pub fn points_at(&self, z: &[f64]) -> Vec<Vec<[f64; 3]>> {
+        self.cables
+            .iter()
+            .map(|cable| {
+                (0..cable.points.len())
+                    .map(|k| cable.position(k, z).into())
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// The tension (N) of every segment of every cable at the full DOF vector `z`.
+    pub fn tensions_at(&self, z: &[f64]) -> Vec<Vec<f64>> {
+        self.cables
+            .iter()
+            .map(|cable| {
+                (0..cable.n_segments())
+                    .map(|k| cable.tension(k, z))
+                    .collect()
+            })
+            .collect()
+    }
+
     /// Cable index of element (segment) `e`.
     pub fn cable_of(&self, e: usize) -> usize {
         self.segments[e].0

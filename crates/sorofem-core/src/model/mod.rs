@@ -1,0 +1,367 @@
+//! A body ready to be solved many times: mesh, boundary conditions, formulation, the sparsity
+//! pattern and the symbolic factorisation (built once), and the material (changeable).
+//!
+//! The pieces: [`layout`] (where each unknown lives), [`terms`] (the registry of energy terms),
+//! `system` (the Newton view of a model), [`statics`] (equilibria), [`dynamics`] (implicit
+//! Euler); sensitivities are in [`crate::sensitivity`].
+
+pub mod dynamics;
+pub mod layout;
+pub mod statics;
+mod system;
+pub(crate) mod terms;
+
+pub use dynamics::{Damping, Trajectory};
+pub use layout::DofLayout;
+pub use statics::{Loads, Solution};
+
+use crate::assembly::{Assembler, Evaluation};
+use crate::cables::{embed, CableSpec, PointPlacement};
+use crate::energy::elastic::PressureCompliance;
+use crate::energy::{CableTerm, ElasticTerm};
+pub use crate::energy::{Formulation as ElementFormulation, PressureMass};
+use crate::error::{check_finite, Error, Result};
+use crate::linear::{FactorKind, SparseFactor};
+use crate::material::Volumetric;
+use crate::mesh::TetMesh;
+use crate::newton::NewtonOptions;
+use std::sync::Arc;
+use terms::Terms;
+
+/// The discretisation of the volumetric response.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Formulation {
+    /// Displacement-only P1 tetrahedra (locks as nu -> 0.5).
+    Standard,
+    /// P1 displacement + P1 nodal pressure, solved as a saddle-point system.
+    Mixed { mass: PressureMass },
+}
+
+/// Per-tet material parameters: shear modulus and Lame's lambda (Pa), density (kg/m^3).
+#[derive(Clone, Debug)]
+pub struct Material {
+    pub mu: Vec<f64>,
+    pub lambda: Vec<f64>,
+    pub density: Vec<f64>,
+}
+
+pub type SolveOptions = NewtonOptions;
+
+pub struct Model {
+    pub(crate) mesh: Arc<TetMesh>,
+    pub(crate) fixed_nodes: Vec<usize>,
+    pub(crate) formulation: Formulation,
+    pub(crate) layout: DofLayout,
+    pub(crate) terms: Terms,
+    pub(crate) placements: Vec<Vec<PointPlacement>>,
+    /// Rest position (m) and mass (kg) of each free cable node.
+    pub(crate) free_nodes: Vec<([f64; 3], f64)>,
+    pub(crate) density: Vec<f64>,
+    pub(crate) assembler: Assembler,
+    pub(crate) factor: SparseFactor,
+    /// The Newton iterations' Hessian values, kept between assemblies (see
+    /// [`crate::assembly::Assembler::evaluate_into`]).
+    pub(crate) hessian_scratch: Evaluation,
+    /// Weight (Pa/m) of the volume-constraint residual rows (m^3) in the mixed residual norm,
+    /// so that they are measured in N like the force rows: `mean(mu) / mean edge length`.
+    pub(crate) pressure_weight: f64,
+    /// Free-node displacements and pressures of the last solve: a warm start's starting guess.
+    pub(crate) last_extra: Option<Vec<f64>>,
+    pub(crate) material_set: bool,
+    /// Full DOF vector and loads of the last static solve (what sensitivities differentiate).
+    pub(crate) last_state: Option<(Vec<f64>, Loads)>,
+    /// The factorisation holds the Hessian at `last_state` (not a Newton iterate's).
+    pub(crate) factor_at_solution: bool,
+}
+
+impl Model {
+    /// Builds the DOF layout, the sparsity pattern and its symbolic factorisation.
+    pub fn try_new(
+        mesh: Arc<TetMesh>,
+        fixed_nodes: &[i64],
+        formulation: Formulation,
+        volumetric: Volumetric,
+    ) -> Result<Self> {
+        Self::try_new_with_cables(mesh, fixed_nodes, formulation, volumetric, &[])
+    }
+
+    /// [`Model::try_new`] with cables (see [`DofLayout`] for where their free nodes go).
+    pub fn try_new_with_cables(
+        mesh: Arc<TetMesh>,
+        fixed_nodes: &[i64],
+        formulation: Formulation,
+        volumetric: Volumetric,
+        cables: &[CableSpec],
+    ) -> Result<Self> {
+        let n = mesh.n_nodes();
+        let mut fixed_set = vec![false; n];
+        let mut fixed = Vec::with_capacity(fixed_nodes.len());
+        for (position, &node) in fixed_nodes.iter().enumerate() {
+            if node < 0 || node as usize >= n {
+                return Err(Error::IndexOutOfRange {
+                    param: "fixed".into(),
+                    position,
+                    index: node,
+                    len: n,
+                });
+            }
+            if fixed_set[node as usize] {
+                return Err(Error::invalid(
+                    "fixed",
+                    "each node at most once",
+                    format!("node {node} repeated"),
+                ));
+            }
+            fixed_set[node as usize] = true;
+            fixed.push(node as usize);
+        }
+        let n_tets = mesh.n_tets();
+        let embedded = embed(&mesh, cables)?;
+        let layout = DofLayout {
+            n_nodes: n,
+            n_free_nodes: embedded.free_nodes.len(),
+            pressures: matches!(formulation, Formulation::Mixed { .. }),
+        };
+        let element_formulation = match formulation {
+            Formulation::Standard => ElementFormulation::Standard,
+            Formulation::Mixed { mass } => ElementFormulation::Mixed {
+                pressure_offset: layout.n_displacement(),
+                mass,
+            },
+        };
+        let terms = Terms {
+            elastic: ElasticTerm {
+                mesh: mesh.clone(),
+                mu: vec![1.0; n_tets],
+                lambda: vec![1.0; n_tets],
+                volumetric,
+                formulation: element_formulation,
+                pressure_iterates: None,
+            },
+            cables: CableTerm::new(embedded.cables),
+        };
+        let fixed_dofs = layout.fixed_dofs(&fixed);
+        // The symbolic factorisation needs only the pattern: it runs beside the element plans.
+        let (assembler, factor) = match formulation {
+            Formulation::Standard => {
+                Assembler::new_with(&fixed_dofs, &terms.internal(), |pattern| {
+                    SparseFactor::analyse(pattern, FactorKind::Llt)
+                })
+            }
+            Formulation::Mixed { mass } => {
+                let compliance = PressureCompliance {
+                    elastic: &terms.elastic,
+                    mass,
+                };
+                let mut free_of_full = vec![None; layout.n_full()];
+                for (index, d) in (0..layout.n_full()).filter(|&d| !fixed_dofs[d]).enumerate() {
+                    free_of_full[d] = Some(index);
+                }
+                Assembler::new_with(&fixed_dofs, &terms.internal(), |pattern| {
+                    // The pressure unknowns live on the nodes, so this pattern is the node graph.
+                    let node_graph = crate::assembly::pattern_of(&vec![false; n], &[&compliance]);
+                    let node_order = crate::linear::amd_order(&node_graph)?;
+                    let order =
+                        layout::saddle_point_order(&layout, &free_of_full, &node_order, &fixed_set);
+                    SparseFactor::analyse_with_order(pattern, &order, FactorKind::Ldlt)
+                })
+            }
+        };
+        Ok(Model {
+            mesh,
+            fixed_nodes: fixed,
+            formulation,
+            layout,
+            terms,
+            placements: embedded.placements,
+            free_nodes: embedded.free_nodes,
+            density: vec![0.0; n_tets],
+            assembler,
+            factor: factor?,
+            hessian_scratch: Default::default(),
+            pressure_weight: 1.0,
+            last_extra: None,
+            material_set: false,
+            last_state: None,
+            factor_at_solution: false,
+        })
+    }
+
+    pub fn mesh(&self) -> &Arc<TetMesh> {
+        &self.mesh
+    }
+
+    pub fn formulation(&self) -> Formulation {
+        self.formulation
+    }
+
+    pub fn layout(&self) -> DofLayout {
+        self.layout
+    }
+
+    pub fn fixed_nodes(&self) -> &[usize] {
+        &self.fixed_nodes
+    }
+
+    /// Number of Newton unknowns (free displacement DOFs plus pressures).
+    pub fn n_free(&self) -> usize {
+        self.assembler.n_free()
+    }
+
+    /// Rest length of each segment of each cable (m), between the points the cable is attached
+    /// to (a snapped point sits on the mesh, not where the user put it).
+    pub fn cable_rest_lengths(&self) -> Vec<Vec<f64>> {
+        self.terms
+            .cables
+            .cables
+            .iter()
+            .map(|c| c.rest_lengths.clone())
+            .collect()
+    }
+
+    /// Where each cable point was placed (embedded, snapped, free node or anchor).
+    pub fn cable_placements(&self) -> &[Vec<PointPlacement>] {
+        &self.placements
+    }
+
+    pub fn n_cables(&self) -> usize {
+        self.terms.cables.cables.len()
+    }
+
+    /// Cable `cable` for modification (callers invalidate the last solution when they change it).
+    fn cable_mut(&mut self, cable: usize) -> Result<&mut crate::energy::Cable> {
+        let len = self.n_cables();
+        self.terms
+            .cables
+            .cables
+            .get_mut(cable)
+            .ok_or_else(|| Error::IndexOutOfRange {
+                param: "cable".into(),
+                position: 0,
+                index: cable as i64,
+                len,
+            })
+    }
+
+    /// Sets cable `cable`'s actuation alpha (> 0; 1 = rest length, < 1 = pulled).
+    pub fn set_actuation(&mut self, cable: usize, actuation: f64) -> Result<()> {
+        if !(actuation > 0.0 && actuation.is_finite()) {
+            return Err(Error::invalid(
+                "actuation",
+                "alpha > 0 (1 = rest, < 1 = pulled)",
+                actuation,
+            ));
+        }
+        let target = self.cable_mut(cable)?;
+        if target.actuation != actuation {
+            target.actuation = actuation;
+            self.last_state = None;
+        }
+        Ok(())
+    }
+
+    /// Sets cable `cable`'s segment stiffness (N/m, > 0).
+    pub fn set_cable_stiffness(&mut self, cable: usize, stiffness: f64) -> Result<()> {
+        if !(stiffness > 0.0 && stiffness.is_finite()) {
+            return Err(Error::invalid(
+                "stiffness",
+                "a finite stiffness > 0 N/m",
+                stiffness,
+            ));
+        }
+        let target = self.cable_mut(cable)?;
+        if target.stiffness != stiffness {
+            target.stiffness = stiffness;
+            self.last_state = None;
+        }
+        Ok(())
+    }
+
+    /// Sets per-tet parameters. Requires `mu > 0`, `0 <= lambda < inf` (`> 0` when mixed), `density >= 0`.
+    pub fn set_material(&mut self, material: &Material) -> Result<()> {
+        let m = self.mesh.n_tets();
+        for (name, values) in [
+            ("mu", &material.mu),
+            ("lambda", &material.lambda),
+            ("density", &material.density),
+        ] {
+            if values.len() != m {
+                return Err(Error::shape(
+                    name,
+                    format!("{m} values (one per tet)"),
+                    format!("{}", values.len()),
+                ));
+            }
+            check_finite(name, values)?;
+        }
+        if let Some(e) = material.mu.iter().position(|&v| !(v > 0.0)) {
+            return Err(Error::invalid(
+                "mu",
+                "shear modulus > 0 Pa",
+                format!("{} at tet {e}", material.mu[e]),
+            ));
+        }
+        // The mixed formulation divides by lambda (C = M_p / lambda); the standard one allows nu = 0.
+        let mixed = self.layout.pressures;
+        if let Some(e) =
+            material
+                .lambda
+                .iter()
+                .position(|&v| if mixed { !(v > 0.0) } else { !(v >= 0.0) })
+        {
+            let expected = if mixed {
+                "Lame lambda > 0 Pa in the mixed formulation (0 < nu < 0.5; nu = 0.5 has no finite lambda and \
+                 leaves the P1-P1 pressure modes uncontrolled)"
+            } else {
+                "Lame lambda >= 0 Pa (0 <= nu < 0.5)"
+            };
+            return Err(Error::invalid(
+                "lambda",
+                expected,
+                format!("{} at tet {e}", material.lambda[e]),
+            ));
+        }
+        if let Some(e) = material.density.iter().position(|&v| v < 0.0) {
+            return Err(Error::invalid(
+                "density",
+                "density >= 0 kg/m^3",
+                format!("{} at tet {e}", material.density[e]),
+            ));
+        }
+        let elastic = &mut self.terms.elastic;
+        let changed = elastic.mu != material.mu
+            || elastic.lambda != material.lambda
+            || self.density != material.density;
+        elastic.mu.clone_from(&material.mu);
+        elastic.lambda.clone_from(&material.lambda);
+        self.density.clone_from(&material.density);
+        if mixed {
+            let m = m as f64;
+            let mean_mu = material.mu.iter().sum::<f64>() / m;
+            let mean_edge =
+                (self.mesh.volumes().iter().sum::<f64>() / m * 6.0 * 2f64.sqrt()).cbrt();
+            self.pressure_weight = mean_mu / mean_edge;
+        }
+        // New parameters make the last solution (and any factorisation at it) stale: sensitivities
+        // then need a new solve rather than silently mixing old positions with new parameters.
+        self.material_set = true;
+        if changed {
+            self.factor_at_solution = false;
+            self.last_state = None;
+        }
+        Ok(())
+    }
+
+    /// `Err` naming `operation` until a material is set.
+    fn require_material(&self, operation: &str) -> Result<()> {
+        if self.material_set {
+            Ok(())
+        } else {
+            Err(Error::invalid(
+                "material",
+                format!("set_material() before {operation}()"),
+                "no material",
+            ))
+        }
+    }
+}
