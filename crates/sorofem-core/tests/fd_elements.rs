@@ -7,7 +7,7 @@ use common::{check_gradient, check_jacobian, Rng};
 use sorofem_core::assembly::Assembler;
 use sorofem_core::energy::elastic::{PressureCompliance, PressureIterates};
 use sorofem_core::energy::{
-    ElasticTerm, Formulation, GravityTerm, HessianMode, PressureMass, Term,
+    ElasticTerm, Formulation, GravityTerm, HessianMode, LumpedMass, PressureMass, Term,
 };
 use sorofem_core::material::Volumetric;
 use sorofem_core::mesh::TetMesh;
@@ -122,9 +122,13 @@ fn mixed_elastic_elements_with_pressure_coupling() {
 #[test]
 fn gravity_element_is_the_lumped_weight() {
     let mesh = small_mesh();
-    let term = GravityTerm {
+    let mass = LumpedMass {
         mesh: mesh.clone(),
         density: vec![1000.0; mesh.n_tets()],
+        points: vec![],
+    };
+    let term = GravityTerm {
+        mass: &mass,
         gravity: [0.0, -9.81, 1.0],
     };
     check_term_elements("gravity", &term, &deformed_state(&mesh, 0, 4));

@@ -205,3 +205,57 @@ pub fn cable_spec(
     }
     Ok(spec)
 }
+
+/// A forward-sensitivity direction from a dict: blocks by name (see `zeros`, the model's blocks),
+/// the material's parameters also inside a `"material"` dict, and the original keys "mu", "lam"
+/// and "rho". Blocks left out are zero.
+pub fn param_direction(
+    direction: &Bound<'_, pyo3::types::PyDict>,
+    zeros: &sorofem_core::sensitivity::ParamVector,
+) -> Result<sorofem_core::sensitivity::ParamVector, Error> {
+    use pyo3::types::PyDictMethods;
+    let mut delta = zeros.clone();
+    let known: Vec<&str> = zeros.blocks.iter().map(|(n, _)| n.as_str()).collect();
+    let mut set = |key: &str, name: &str, value: &Bound<'_, PyAny>| -> Result<(), Error> {
+        let Some(target) = delta.get_mut(name) else {
+            return Err(Error::invalid(
+                "direction",
+                format!(
+                    "keys among {known:?}, \"material\" and the aliases \"mu\", \"lam\", \"rho\""
+                ),
+                format!("{key:?}"),
+            ));
+        };
+        let len = target.len();
+        *target = vector(&format!("direction[{key:?}]"), value, Some(len))?;
+        Ok(())
+    };
+    for (key, value) in direction.iter() {
+        let key: String = key
+            .extract()
+            .map_err(|_| Error::invalid("direction", "string keys", key.to_string()))?;
+        if key == "material" {
+            let inner = value.cast::<pyo3::types::PyDict>().map_err(|_| {
+                Error::shape(
+                    "direction[\"material\"]",
+                    "a dict of per-tet arrays by parameter name",
+                    describe(&value),
+                )
+            })?;
+            for (name, values) in inner.iter() {
+                let name: String = name.extract().map_err(|_| {
+                    Error::invalid("direction[\"material\"]", "string keys", name.to_string())
+                })?;
+                set(&format!("material.{name}"), &name, &values)?;
+            }
+            continue;
+        }
+        let name = match key.as_str() {
+            "lam" => "lambda",
+            "rho" => "density",
+            other => other,
+        };
+        set(&key, name, &value)?;
+    }
+    Ok(delta)
+}

@@ -147,24 +147,40 @@ fn loads_from(
     })
 }
 
+/// A parameter vector as a dict: `"material"` maps each material parameter name to its per-tet
+/// values, every other block sits under its own name ("density", "gravity", "cable_actuation",
+/// "cable_stiffness"), and the keys of the original API stay: "mu", "lam" (Neo-Hookean) and
+/// "rho" (density).
 fn param_vector_to_dict<'py>(
     py: Python<'py>,
     p: &sorofem_core::sensitivity::ParamVector,
+    material_names: &[String],
 ) -> PyResult<Bound<'py, PyDict>> {
     let out = PyDict::new(py);
-    out.set_item("mu", PyArray1::from_slice(py, &p.mu))?;
-    out.set_item("lam", PyArray1::from_slice(py, &p.lambda))?;
-    out.set_item("rho", PyArray1::from_slice(py, &p.density))?;
-    out.set_item("gravity", PyArray1::from_slice(py, &p.gravity))?;
-    out.set_item(
-        "cable_actuation",
-        PyArray1::from_slice(py, &p.cable_actuation),
-    )?;
-    out.set_item(
-        "cable_stiffness",
-        PyArray1::from_slice(py, &p.cable_stiffness),
-    )?;
+    let material = PyDict::new(py);
+    for (name, values) in &p.blocks {
+        let array = PyArray1::from_slice(py, values);
+        if material_names.contains(name) {
+            material.set_item(name, &array)?;
+        } else {
+            out.set_item(name, &array)?;
+        }
+        if let Some(alias) = legacy_param_key(name) {
+            out.set_item(alias, array)?;
+        }
+    }
+    out.set_item("material", material)?;
     Ok(out)
+}
+
+/// The original API's key of a parameter block, where it had one.
+fn legacy_param_key(name: &str) -> Option<&'static str> {
+    match name {
+        "mu" => Some("mu"),
+        "lambda" => Some("lam"),
+        "density" => Some("rho"),
+        _ => None,
+    }
 }
 
 /// A body ready to be solved many times (see sorofem.model.Body, which owns one).
@@ -452,7 +468,7 @@ impl Model {
             .collect();
         let inner = &mut self.inner;
         let gradient = py.detach(|| inner.adjoint(&g)).py(py)?;
-        param_vector_to_dict(py, &gradient)
+        param_vector_to_dict(py, &gradient, &self.inner.material_param_names())
     }
 
     /// Forward sensitivity along a parameter direction (dict with any of the adjoint's keys):
@@ -462,34 +478,7 @@ impl Model {
         py: Python<'py>,
         direction: &Bound<'py, PyDict>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let m = self.inner.mesh().n_tets();
-        let c = self.inner.n_cables();
-        let mut delta = sorofem_core::sensitivity::ParamVector::zeros(m, c);
-        for (key, value) in direction.iter() {
-            let key: String = key.extract()?;
-            let target: &mut Vec<f64> =
-                match key.as_str() {
-                    "mu" => &mut delta.mu,
-                    "lam" => &mut delta.lambda,
-                    "rho" => &mut delta.density,
-                    "cable_actuation" => &mut delta.cable_actuation,
-                    "cable_stiffness" => &mut delta.cable_stiffness,
-                    "gravity" => {
-                        delta.gravity = convert::vec3("direction[\"gravity\"]", &value).py(py)?;
-                        continue;
-                    }
-                    other => return Err(errors::to_py(
-                        py,
-                        sorofem_core::Error::invalid(
-                            "direction",
-                            "keys among mu, lam, rho, gravity, cable_actuation, cable_stiffness",
-                            format!("{other:?}"),
-                        ),
-                    )),
-                };
-            let len = target.len();
-            *target = convert::vector(&format!("direction[{key:?}]"), &value, Some(len)).py(py)?;
-        }
+        let delta = convert::param_direction(direction, &self.inner.param_zeros()).py(py)?;
         let inner = &mut self.inner;
         let (dx, dp) = py.detach(|| inner.forward(&delta)).py(py)?;
         let out = PyDict::new(py);

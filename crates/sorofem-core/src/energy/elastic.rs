@@ -14,7 +14,7 @@
 
 use super::{
     add_tet_gradient, set_isotropic_tet_hessian, set_projected_isotropic_tet_hessian, HessianMode,
-    Term,
+    ParamTerm, Term,
 };
 use crate::material::{NeoHookean, Volumetric};
 use crate::mesh::TetMesh;
@@ -514,5 +514,22 @@ impl ElasticTerm {
                 }
             }
         }
+    }
+}
+
+impl ParamTerm for ElasticTerm {
+    fn param_blocks(&self) -> Vec<(String, usize)> {
+        let m = self.mesh.n_tets();
+        vec![("mu".into(), m), ("lambda".into(), m)]
+    }
+    fn element_param_count(&self) -> usize {
+        2
+    }
+    fn element_params(&self, e: usize, params: &mut [(usize, usize)]) {
+        params.copy_from_slice(&[(0, e), (1, e)]);
+    }
+    fn element_param_gradient(&self, e: usize, z: &[f64], out: &mut [f64]) {
+        let (d_mu, d_lambda) = out.split_at_mut(self.stencil_size());
+        self.element_param_derivatives(e, z, d_mu, d_lambda);
     }
 }

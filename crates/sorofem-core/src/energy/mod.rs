@@ -10,7 +10,7 @@ pub mod loads;
 
 pub use cable::{Cable, CableTerm, PointMap};
 pub use elastic::{ElasticTerm, Formulation, PressureMass};
-pub use loads::{GravityTerm, NodalForceTerm};
+pub use loads::{GravityTerm, LumpedMass, NodalForceTerm, PointGravityTerm};
 
 use crate::material::Mat3;
 #[cfg(test)]
@@ -50,6 +50,27 @@ pub trait Term: Sync {
     fn is_linear(&self) -> bool {
         false
     }
+}
+
+/// A term whose gradient depends on parameters (material constants, density, gravity, cable
+/// actuation and stiffness): what sensitivities need of it, so that they need no code of their
+/// own per term.
+///
+/// The parameters form named blocks; blocks of the same name in several terms are one parameter
+/// (gravity acts on the tets and on the free cable nodes alike).
+pub trait ParamTerm: Term {
+    /// Name and length of each of the term's parameter blocks, e.g. `("gravity", 3)`.
+    fn param_blocks(&self) -> Vec<(String, usize)>;
+    /// Number of parameters the gradient of one element depends on.
+    fn element_param_count(&self) -> usize;
+    /// Writes the parameters element `e` depends on, each as `(block, index)`: the position of
+    /// its block in [`ParamTerm::param_blocks`] and its index within the block.
+    fn element_params(&self, e: usize, params: &mut [(usize, usize)]);
+    /// `d(grad_e)/d(theta_k)` at the element's local DOF values `z`, for each of its parameters
+    /// `theta_k` in the order of [`ParamTerm::element_params`]: writes every entry of
+    /// `out` (`element_param_count() x stencil_size()`, row-major; units of the gradient per
+    /// unit of the parameter).
+    fn element_param_gradient(&self, e: usize, z: &[f64], out: &mut [f64]);
 }
 
 /// Adds `V sum_j P_ij g_aj` to `grad[3a + i]`: the nodal forces of a stress P on a tet.

@@ -32,25 +32,6 @@ pub struct Trajectory {
 }
 
 impl Model {
-    /// Lumped mass (kg) of every full DOF: `rho V / 4` per tet and node, free cable nodes' own
-    /// masses, zero for pressures.
-    pub(crate) fn lumped_mass(&self) -> Vec<f64> {
-        let mut mass = vec![0.0; self.layout.n_full()];
-        for (e, tet) in self.mesh.tets().iter().enumerate() {
-            let m = self.density[e] * self.mesh.volumes()[e] / 4.0;
-            for &i in tet {
-                for k in 0..3 {
-                    mass[3 * i + k] += m;
-                }
-            }
-        }
-        for (i, &(_, m)) in self.free_nodes.iter().enumerate() {
-            let first = self.layout.free_node(i);
-            mass[first..first + 3].fill(m);
-        }
-        mass
-    }
-
     /// Implicit Euler in time: each step minimises the incremental potential
     /// `1/2 |u - u_n - h v_n|_M^2 / h^2 + 1/2 |u - u_n|_D^2 / h + Pi(u)` (lumped mass M,
     /// Rayleigh damping `D = alpha_M M + beta_K K_n`), then `v = (u - u_n) / h`. A step whose
@@ -99,7 +80,7 @@ impl Model {
         let rest = self.mesh.rest_flat();
         let mut z = self.start_state("initial_positions", initial_positions)?;
         let free: Vec<usize> = self.assembler.full_of_free().to_vec();
-        let mass_full = self.lumped_mass();
+        let mass_full = self.terms.mass.per_dof(self.layout.n_full());
         let mass: Vec<f64> = free.iter().map(|&d| mass_full[d]).collect();
         let mut velocity = vec![0.0; free.len()];
         if let Some(v) = initial_velocities {

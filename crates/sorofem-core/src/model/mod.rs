@@ -18,7 +18,7 @@ pub use statics::{Loads, Solution};
 use crate::assembly::{Assembler, Evaluation};
 use crate::cables::{embed, CableSpec, PointPlacement};
 use crate::energy::elastic::PressureCompliance;
-use crate::energy::{CableTerm, ElasticTerm};
+use crate::energy::{CableTerm, ElasticTerm, LumpedMass};
 pub use crate::energy::{Formulation as ElementFormulation, PressureMass};
 use crate::error::{check_finite, Error, Result};
 use crate::linear::{FactorKind, SparseFactor};
@@ -54,9 +54,6 @@ pub struct Model {
     pub(crate) layout: DofLayout,
     pub(crate) terms: Terms,
     pub(crate) placements: Vec<Vec<PointPlacement>>,
-    /// Rest position (m) and mass (kg) of each free cable node.
-    pub(crate) free_nodes: Vec<([f64; 3], f64)>,
-    pub(crate) density: Vec<f64>,
     pub(crate) assembler: Assembler,
     pub(crate) factor: SparseFactor,
     /// The Newton iterations' Hessian values, kept between assemblies (see
@@ -139,6 +136,13 @@ impl Model {
                 pressure_iterates: None,
             },
             cables: CableTerm::new(embedded.cables),
+            mass: LumpedMass {
+                mesh: mesh.clone(),
+                density: vec![0.0; n_tets],
+                points: (embedded.free_nodes.iter().enumerate())
+                    .map(|(i, &(_, mass))| (layout.free_node(i), mass))
+                    .collect(),
+            },
         };
         let fixed_dofs = layout.fixed_dofs(&fixed);
         // The symbolic factorisation needs only the pattern: it runs beside the element plans.
@@ -174,8 +178,6 @@ impl Model {
             layout,
             terms,
             placements: embedded.placements,
-            free_nodes: embedded.free_nodes,
-            density: vec![0.0; n_tets],
             assembler,
             factor: factor?,
             hessian_scratch: Default::default(),
@@ -197,6 +199,14 @@ impl Model {
 
     pub fn layout(&self) -> DofLayout {
         self.layout
+    }
+
+    /// Names of the material's parameters, in the order they are stored (one value per tet each).
+    pub fn material_param_names(&self) -> Vec<String> {
+        use crate::energy::ParamTerm;
+        (self.terms.elastic.param_blocks().into_iter())
+            .map(|(name, _)| name)
+            .collect()
     }
 
     pub fn fixed_nodes(&self) -> &[usize] {
@@ -328,13 +338,13 @@ impl Model {
                 format!("{} at tet {e}", material.density[e]),
             ));
         }
-        let elastic = &mut self.terms.elastic;
+        let (elastic, mass) = (&mut self.terms.elastic, &mut self.terms.mass);
         let changed = elastic.mu != material.mu
             || elastic.lambda != material.lambda
-            || self.density != material.density;
+            || mass.density != material.density;
         elastic.mu.clone_from(&material.mu);
         elastic.lambda.clone_from(&material.lambda);
-        self.density.clone_from(&material.density);
+        mass.density.clone_from(&material.density);
         if mixed {
             let m = m as f64;
             let mean_mu = material.mu.iter().sum::<f64>() / m;

@@ -2,7 +2,7 @@
 
 use super::system::System;
 use super::Model;
-use crate::energy::{GravityTerm, HessianMode, NodalForceTerm};
+use crate::energy::HessianMode;
 use crate::error::{check_finite, Error, Result};
 use crate::material::neo_hookean::von_mises;
 use crate::newton::{self, NewtonOptions};
@@ -153,28 +153,7 @@ impl Model {
 
     /// External load vector (N, full DOFs) of `loads`, free cable nodes' weight included.
     pub(crate) fn load_vector(&self, loads: &Loads) -> Vec<f64> {
-        let gravity = GravityTerm {
-            mesh: self.mesh.clone(),
-            density: self.density.clone(),
-            gravity: loads.gravity,
-        };
-        let free_node_weights = self.free_nodes.iter().enumerate().map(|(i, &(_, mass))| {
-            (
-                self.layout.free_node(i) / 3,
-                loads.gravity.map(|g| mass * g),
-            )
-        });
-        let point_forces: Vec<(usize, [f64; 3])> = loads
-            .nodal_forces
-            .iter()
-            .copied()
-            .chain(free_node_weights)
-            .collect();
-        let forces = NodalForceTerm {
-            nodes: point_forces.iter().map(|f| f.0).collect(),
-            forces: point_forces.iter().map(|f| f.1).collect(),
-        };
-        self.assembler.load_vector(&[&gravity, &forces])
+        self.assembler.load_vector(&self.terms.loads(loads).list())
     }
 
     /// Per-tet volume ratio `J = det F` and von Mises Cauchy stress (Pa) at `positions` (3 n).
