@@ -76,6 +76,10 @@ fn main() {
         model.n_free(),
         t.elapsed().as_secs_f64()
     );
+    // PROFILE_GENERAL=1: the element kernels' general path instead of the Neo-Hookean closed
+    // forms (what models without closed forms cost).
+    let general = std::env::var_os("PROFILE_GENERAL").is_some();
+    model.set_closed_forms(!general);
     model
         .set_material(&Material {
             mu: vec![mu; m],
@@ -128,14 +132,14 @@ fn main() {
     }
     // Isolated kernels.
     let n = mesh.n_nodes();
-    let term = ElasticTerm {
-        mesh: mesh.clone(),
-        mu: vec![mu; m],
-        lambda: vec![lambda; m],
-        volumetric: Volumetric::Log,
-        formulation: ElementFormulation::Standard,
-        pressure_iterates: None,
-    };
+    let mut term = ElasticTerm::neo_hookean(
+        mesh.clone(),
+        &vec![mu; m],
+        &vec![lambda; m],
+        Volumetric::Log,
+        ElementFormulation::Standard,
+    );
+    term.closed_forms = !general;
     let mut fixed_dofs = vec![false; 3 * n];
     for &i in &fixed {
         fixed_dofs[3 * i as usize..3 * i as usize + 3].fill(true);

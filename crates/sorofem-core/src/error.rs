@@ -66,6 +66,22 @@ impl Error {
             given: given.to_string(),
         }
     }
+
+    /// The error of a per-tet value, saying which tet: `given` gains " at tet {e}".
+    pub fn at_tet(self, e: usize) -> Self {
+        match self {
+            Error::InvalidParameter {
+                param,
+                expected,
+                given,
+            } => Error::InvalidParameter {
+                param,
+                expected,
+                given: format!("{given} at tet {e}"),
+            },
+            other => other,
+        }
+    }
 }
 
 impl fmt::Display for Error {

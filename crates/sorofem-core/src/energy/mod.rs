@@ -7,14 +7,13 @@
 pub mod cable;
 pub mod elastic;
 pub mod loads;
+pub mod pressure_iterates;
 
 pub use cable::{Cable, CableTerm, PointMap};
 pub use elastic::{ElasticTerm, Formulation, PressureMass};
 pub use loads::{GravityTerm, LumpedMass, NodalForceTerm, PointGravityTerm};
 
-use crate::material::Mat3;
-#[cfg(test)]
-use crate::material::Tangent;
+use crate::material::{Mat3, Tangent};
 use nalgebra::Vector3;
 
 /// How an element Hessian is formed.
@@ -83,9 +82,9 @@ pub(crate) fn add_tet_gradient(volume: f64, g: &[Vector3<f64>; 4], p: &Mat3, gra
     }
 }
 
-/// Adds `V sum_jl A[3i+j, 3k+l] g_aj g_bl` to `hess[(3a+i) * stride + 3b+k]`: the general
-/// path, kept as the reference the isotropic shortcuts are tested against.
-#[cfg(test)]
+/// Adds `V sum_jl A[3i+j, 3k+l] g_aj g_bl` to `hess[(3a+i) * stride + 3b+k]`: the element
+/// Hessian of a 9x9 material tangent A (models without an isotropic closed form, and the
+/// reference the isotropic shortcuts are tested against).
 pub(crate) fn add_tet_hessian(
     volume: f64,
     g: &[Vector3<f64>; 4],

@@ -22,7 +22,7 @@ use crate::energy::{CableTerm, ElasticTerm, LumpedMass};
 pub use crate::energy::{Formulation as ElementFormulation, PressureMass};
 use crate::error::{check_finite, Error, Result};
 use crate::linear::{FactorKind, SparseFactor};
-use crate::material::Volumetric;
+use crate::material::{shear_modulus, MaterialModel, Volumetric};
 use crate::mesh::TetMesh;
 use crate::newton::NewtonOptions;
 use std::sync::Arc;
@@ -37,7 +37,8 @@ pub enum Formulation {
     Mixed { mass: PressureMass },
 }
 
-/// Per-tet material parameters: shear modulus and Lame's lambda (Pa), density (kg/m^3).
+/// Per-tet Neo-Hookean parameters: shear modulus and Lame's lambda (Pa), density (kg/m^3)
+/// (see [`Model::set_material_model`] for any model).
 #[derive(Clone, Debug)]
 pub struct Material {
     pub mu: Vec<f64>,
@@ -54,6 +55,8 @@ pub struct Model {
     pub(crate) layout: DofLayout,
     pub(crate) terms: Terms,
     pub(crate) placements: Vec<Vec<PointPlacement>>,
+    /// The constructor's volumetric measure: the Neo-Hookean model's unless told otherwise.
+    pub(crate) volumetric: Volumetric,
     pub(crate) assembler: Assembler,
     pub(crate) factor: SparseFactor,
     /// The Newton iterations' Hessian values, kept between assemblies (see
@@ -127,14 +130,13 @@ impl Model {
             },
         };
         let terms = Terms {
-            elastic: ElasticTerm {
-                mesh: mesh.clone(),
-                mu: vec![1.0; n_tets],
-                lambda: vec![1.0; n_tets],
+            elastic: ElasticTerm::neo_hookean(
+                mesh.clone(),
+                &vec![1.0; n_tets],
+                &vec![1.0; n_tets],
                 volumetric,
-                formulation: element_formulation,
-                pressure_iterates: None,
-            },
+                element_formulation,
+            ),
             cables: CableTerm::new(embedded.cables),
             mass: LumpedMass {
                 mesh: mesh.clone(),
@@ -178,6 +180,7 @@ impl Model {
             layout,
             terms,
             placements: embedded.placements,
+            volumetric,
             assembler,
             factor: factor?,
             hessian_scratch: Default::default(),
@@ -201,12 +204,22 @@ impl Model {
         self.layout
     }
 
+    /// The material model (Neo-Hookean with the constructor's volumetric measure until
+    /// [`Model::set_material_model`] says otherwise).
+    pub fn material_model(&self) -> MaterialModel {
+        self.terms.elastic.material()
+    }
+
+    /// Whether the element kernels use a model's closed forms (Neo-Hookean: isotropic Hessian,
+    /// analytic projection; on by default). Off sends every model through the general path of
+    /// models without them: the same results to round-off, for tests and benchmarks.
+    pub fn set_closed_forms(&mut self, on: bool) {
+        self.terms.elastic.closed_forms = on;
+    }
+
     /// Names of the material's parameters, in the order they are stored (one value per tet each).
     pub fn material_param_names(&self) -> Vec<String> {
-        use crate::energy::ParamTerm;
-        (self.terms.elastic.param_blocks().into_iter())
-            .map(|(name, _)| name)
-            .collect()
+        self.material_model().param_names()
     }
 
     pub fn fixed_nodes(&self) -> &[usize] {
@@ -287,14 +300,58 @@ impl Model {
         Ok(())
     }
 
-    /// Sets per-tet parameters. Requires `mu > 0`, `0 <= lambda < inf` (`> 0` when mixed), `density >= 0`.
+    /// Sets a Neo-Hookean material (with the constructor's volumetric measure): per-tet `mu > 0`,
+    /// `lambda >= 0` (`> 0` in the mixed formulation) and `density >= 0`.
     pub fn set_material(&mut self, material: &Material) -> Result<()> {
+        let model = MaterialModel::NeoHookean {
+            volumetric: self.volumetric,
+        };
+        let params = [
+            ("mu".to_string(), material.mu.clone()),
+            ("lambda".to_string(), material.lambda.clone()),
+        ];
+        self.set_material_model(model, &params, &material.density)
+    }
+
+    /// Sets the material model, its parameters by name (each one value per tet, every name of
+    /// [`MaterialModel::param_names`] exactly once) and the density (kg/m^3, per tet, >= 0).
+    /// Each tet's parameters are checked by the model ([`MaterialModel::try_at`]); errors name
+    /// the parameter and the tet.
+    pub fn set_material_model(
+        &mut self,
+        model: MaterialModel,
+        params: &[(String, Vec<f64>)],
+        density: &[f64],
+    ) -> Result<()> {
         let m = self.mesh.n_tets();
-        for (name, values) in [
-            ("mu", &material.mu),
-            ("lambda", &material.lambda),
-            ("density", &material.density),
-        ] {
+        let names = model.param_names();
+        if let Some((unknown, _)) = params.iter().find(|(name, _)| !names.contains(name)) {
+            return Err(Error::invalid(
+                "params",
+                format!("the parameters {names:?} of the {} model", model.name()),
+                format!("{unknown:?}"),
+            ));
+        }
+        let mut columns = Vec::with_capacity(names.len());
+        for name in &names {
+            let mut given = params.iter().filter(|(n, _)| n == name);
+            let (Some((_, values)), None) = (given.next(), given.next()) else {
+                return Err(Error::invalid(
+                    "params",
+                    format!("each of {names:?} exactly once"),
+                    format!(
+                        "{name:?} {} times",
+                        params.iter().filter(|(n, _)| n == name).count()
+                    ),
+                ));
+            };
+            columns.push(values);
+        }
+        let named = names
+            .iter()
+            .map(String::as_str)
+            .zip(columns.iter().map(|c| c.as_slice()));
+        for (name, values) in named.chain([("density", density)]) {
             if values.len() != m {
                 return Err(Error::shape(
                     name,
@@ -304,53 +361,35 @@ impl Model {
             }
             check_finite(name, values)?;
         }
-        if let Some(e) = material.mu.iter().position(|&v| !(v > 0.0)) {
-            return Err(Error::invalid(
-                "mu",
-                "shear modulus > 0 Pa",
-                format!("{} at tet {e}", material.mu[e]),
-            ));
-        }
-        // The mixed formulation divides by lambda (C = M_p / lambda); the standard one allows nu = 0.
         let mixed = self.layout.pressures;
-        if let Some(e) =
-            material
-                .lambda
-                .iter()
-                .position(|&v| if mixed { !(v > 0.0) } else { !(v >= 0.0) })
-        {
-            let expected = if mixed {
-                "Lame lambda > 0 Pa in the mixed formulation (0 < nu < 0.5; nu = 0.5 has no finite lambda and \
-                 leaves the P1-P1 pressure modes uncontrolled)"
-            } else {
-                "Lame lambda >= 0 Pa (0 <= nu < 0.5)"
-            };
-            return Err(Error::invalid(
-                "lambda",
-                expected,
-                format!("{} at tet {e}", material.lambda[e]),
-            ));
+        let mut flat = Vec::with_capacity(m * names.len());
+        let mut shear = 0.0;
+        for e in 0..m {
+            let start = flat.len();
+            flat.extend(columns.iter().map(|c| c[e]));
+            let material = model
+                .try_at(&flat[start..], mixed)
+                .map_err(|error| error.at_tet(e))?;
+            shear += shear_modulus(&material);
         }
-        if let Some(e) = material.density.iter().position(|&v| v < 0.0) {
+        if let Some(e) = density.iter().position(|&v| v < 0.0) {
             return Err(Error::invalid(
                 "density",
                 "density >= 0 kg/m^3",
-                format!("{} at tet {e}", material.density[e]),
+                format!("{} at tet {e}", density[e]),
             ));
         }
         let (elastic, mass) = (&mut self.terms.elastic, &mut self.terms.mass);
-        let changed = elastic.mu != material.mu
-            || elastic.lambda != material.lambda
-            || mass.density != material.density;
-        elastic.mu.clone_from(&material.mu);
-        elastic.lambda.clone_from(&material.lambda);
-        mass.density.clone_from(&material.density);
+        let changed =
+            elastic.material() != model || elastic.params() != flat || mass.density != density;
+        elastic.set_material(model, flat);
+        mass.density = density.to_vec();
         if mixed {
             let m = m as f64;
-            let mean_mu = material.mu.iter().sum::<f64>() / m;
+            let mean_shear = shear / m;
             let mean_edge =
                 (self.mesh.volumes().iter().sum::<f64>() / m * 6.0 * 2f64.sqrt()).cbrt();
-            self.pressure_weight = mean_mu / mean_edge;
+            self.pressure_weight = mean_shear / mean_edge;
         }
         // New parameters make the last solution (and any factorisation at it) stale: sensitivities
         // then need a new solve rather than silently mixing old positions with new parameters.
@@ -369,7 +408,7 @@ impl Model {
         } else {
             Err(Error::invalid(
                 "material",
-                format!("set_material() before {operation}()"),
+                format!("set_material() or set_material_model() before {operation}()"),
                 "no material",
             ))
         }

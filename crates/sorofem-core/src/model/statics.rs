@@ -4,7 +4,7 @@ use super::system::System;
 use super::Model;
 use crate::energy::HessianMode;
 use crate::error::{check_finite, Error, Result};
-use crate::material::neo_hookean::von_mises;
+use crate::material::{cauchy_stress, neo_hookean::von_mises};
 use crate::newton::{self, NewtonOptions};
 use crate::report::SolveReport;
 
@@ -158,7 +158,7 @@ impl Model {
 
     /// Per-tet volume ratio `J = det F` and von Mises Cauchy stress (Pa) at `positions` (3 n).
     /// In the mixed formulation the stress uses the element's volumetric response
-    /// `lambda c(J) c'(J) J` of the same energy, so both formulations report comparable stresses.
+    /// `kappa c(J) c'(J) J` of the same energy, so both formulations report comparable stresses.
     pub fn element_fields(&self, positions: &[f64]) -> Result<(Vec<f64>, Vec<f64>)> {
         let n = self.mesh.n_nodes();
         if positions.len() != 3 * n {
@@ -179,10 +179,7 @@ impl Model {
             let f = self.mesh.deformation_gradient(e, &u);
             j.push(f.determinant());
             vm.push(
-                self.terms
-                    .elastic
-                    .material(e)
-                    .cauchy_stress(&f)
+                cauchy_stress(&self.terms.elastic.element_material(e), &f)
                     .map_or(f64::NAN, |s| von_mises(&s)),
             );
         }

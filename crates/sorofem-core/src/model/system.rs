@@ -3,7 +3,7 @@
 //! [`crate::newton`] asks of it. Statics and dynamics both solve through it.
 
 use super::{Formulation, Model};
-use crate::energy::elastic::{PressureIterates, PressureLinearisations};
+use crate::energy::pressure_iterates::{PressureIterates, PressureLinearisations};
 use crate::energy::HessianMode;
 use crate::error::Result;
 use crate::linear::LowerPattern;
@@ -369,7 +369,7 @@ impl AuxiliaryIterates for System<'_> {
             self.model.terms.elastic.pressure_iterates =
                 Some(PressureIterates::new(self.pressure_base.clone()));
             // Swapped with the recorded ones: both sized for every tet.
-            if self.linearised_pressures.len() != self.pressure_base.len() {
+            if self.linearised_pressures.n_tets() != self.pressure_base.len() {
                 self.linearised_pressures = PressureLinearisations::new(self.pressure_base.len());
             }
             self.linearised_at_iterate = false;
