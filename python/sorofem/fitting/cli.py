@@ -11,7 +11,8 @@ writes ``DIR/fit.json`` (:meth:`~sorofem.fitting.MaterialFit.to_dict`) and ``DIR
 (data against fit). ``DIR`` defaults to the current directory; each file is written under a
 temporary name and renamed, and never over one of the input files.
 
-A CSV without a ``# mode:`` line takes ``--mode``; one that names a different mode is an error.
+A CSV without a ``# mode:`` line takes ``--mode``; a file's own ``# mode:`` line wins (the
+summary lists the mode each file was fitted as).
 Exit codes: 0 success; 2 bad input (a message naming the file and line, or the argument);
 3 the fit did not converge (the cost history is printed).
 """
@@ -49,7 +50,7 @@ def _parser() -> argparse.ArgumentParser:
                         help="test curves: columns stretch (or strain) and nominal_stress")
     parser.add_argument("--model", required=True, choices=MODELS)
     parser.add_argument("--terms", type=int, help="yeoh: coefficients c10..c30 fitted; ogden: term pairs (1-3)")
-    parser.add_argument("--mode", choices=MODES, help="test mode of files without a '# mode:' line")
+    parser.add_argument("--mode", choices=MODES, help="test mode of files without a '# mode:' line (theirs wins)")
     parser.add_argument("--bulk-modulus", type=float, metavar="K", help="Pa; compressible curves (default incompressible)")
     parser.add_argument("--stress-unit", metavar="UNIT", help="Pa, kPa, MPa, GPa or psi, for files that name none")
     parser.add_argument("--weights", choices=("relative", "absolute"), default="relative")

@@ -182,8 +182,7 @@ def read_curve(path: str | os.PathLike[str], *, mode: str | None = None, stress_
     path
         The CSV file.
     mode
-        The test mode, for a file without a ``# mode:`` line (a file that names another mode
-        is an error).
+        The test mode of a file without a ``# mode:`` line (a file's own line wins).
     stress_unit
         The stress unit, for a file that names none (Pa when neither does).
 
@@ -191,7 +190,7 @@ def read_curve(path: str | os.PathLike[str], *, mode: str | None = None, stress_
     ------
     DataFileError
         Naming the file, the line and the column: no header, a missing column, a field that
-        is not a number, NaN, non-monotone stretch, wrong stress sign, conflicting modes or
+        is not a number, NaN, non-monotone stretch, wrong stress sign, no mode, conflicting
         units.
 
     Examples
@@ -254,8 +253,6 @@ def read_curve(path: str | os.PathLike[str], *, mode: str | None = None, stress_
         if file_mode not in MODES:
             raise DataFileError(f"unknown test mode {value!r}; expected one of {', '.join(MODES)}",
                                 path=path, line=number)
-        if mode is not None and _normalize_mode(mode) != file_mode:
-            raise DataFileError(f"the file says '# mode: {value}' but mode={mode!r} was given", path=path, line=number)
     chosen = file_mode or mode
     if chosen is None:
         raise DataFileError("test mode unknown: add a line '# mode: uniaxial' (or equibiaxial, planar) "

@@ -25,7 +25,9 @@ Array = NDArray[np.float64]
 # singular value is below this fraction of the largest (cond(J^T J) > 1e16: numerically singular).
 _SINGULAR = 1e-8
 # Above this condition number of the column-scaled J^T J the fit warns of correlated parameters.
-_ILL_CONDITIONED = 1e10
+_ILL_CONDITIONED = 1e8
+# A standard error above this fraction of the value: the parameter is poorly determined.
+_POORLY_DETERMINED = 0.5
 # Relative weights floor: points with |P| below this fraction of their curve's largest |P|
 # count as if they had that stress, so the rest state P = 0 does not get an infinite weight.
 _RELATIVE_FLOOR = 1e-3
@@ -117,6 +119,9 @@ class MaterialFit:
         lines = [f"{self.model} fit ({compress}{terms}) to {len(self.curves)} curve(s), {n_points} points, "
                  f"{self.weights} weights",
                  f"  rms residual {self.rms:.3g} Pa ({100 * self.rms_relative:.3g} % relative)"]
+        for curve, res in zip(self.curves, self.residuals):
+            lines.append(f"  data {curve.source}: {curve.mode}, {curve.stretch.size} points, stretch "
+                         f"{curve.stretch.min():.4g}..{curve.stretch.max():.4g}, rms {np.sqrt(np.mean(res**2)):.3g} Pa")
         width = max(len(n) for n in self.params)
         for name, value in self.params.items():
             unit = "1/Pa" if name.startswith("d") else ("" if name.startswith("alpha") else "Pa")
@@ -126,6 +131,8 @@ class MaterialFit:
                 text = "0 (incompressible)"
             elif name.startswith("d") and value == 0:
                 text = "0 (no term)"
+            elif name.startswith("d"):
+                text = f"{value:.10g} {unit} (= 2/K)"
             else:
                 text = f"{value:.10g} {unit}".rstrip() + " (fixed)"
             lines.append(f"  {name:<{width}} = {text}")
@@ -319,9 +326,13 @@ def fit_material(
         unknown = sorted(set(x0) - set(free))
         if unknown:
             raise ParameterError(f"x0 names {unknown}, which are not fitted (fitted: {', '.join(free)})", "x0")
-        start = problem.linear_start(None)
-        for name, value in x0.items():
-            start[free.index(name)] = _check_value(spec, name, value, "x0")
+        given = {name: _check_value(spec, name, value, "x0") for name, value in x0.items()}
+        missing = [n for n in free if n.startswith("alpha") and n not in given]
+        if missing:
+            raise ParameterError(f"x0 must give every fitted Ogden exponent; missing {', '.join(missing)}", missing[0])
+        start = problem.linear_start({free.index(n): v for n, v in given.items() if n.startswith("alpha")})
+        for name, value in given.items():
+            start[free.index(name)] = value
         starts = [start]
     elif spec.name == "ogden":
         starts = problem.ogden_starts(free)
@@ -614,11 +625,20 @@ def _warnings(fit: MaterialFit) -> list[str]:
     if lost:
         out.append(f"not identifiable from these data: {', '.join(lost)} (J^T J is singular; fix them or add "
                    "test modes / a wider stretch range)")
-    elif fit.condition_number > _ILL_CONDITIONED and len(fit.free) > 1:
-        corr = np.abs(fit.correlation - np.eye(len(fit.free)))
-        i, j = np.unravel_index(int(np.argmax(corr)), corr.shape)
-        out.append(f"ill-conditioned (cond(J^T J) = {fit.condition_number:.2g}): {fit.free[i]} and {fit.free[j]} "
-                   f"are correlated ({fit.correlation[i, j]:+.6f}); the data hardly separate them")
+    elif fit.condition_number > _ILL_CONDITIONED:
+        out.append(f"ill-conditioned: cond(J^T J) = {fit.condition_number:.2g} with unit columns")
+    p = len(fit.free)
+    for i, name in enumerate(fit.free):
+        value, err = fit.params[name], fit.standard_errors[name]
+        if name in lost or not err > _POORLY_DETERMINED * abs(value):
+            continue
+        text = f"{name} is poorly determined ({format_uncertain(value, err)})"
+        if p > 1:
+            others = np.abs(fit.correlation[i]) * (np.arange(p) != i)
+            j = int(np.argmax(others))
+            if others[j] > 0.9:
+                text += f": correlated with {fit.free[j]} (r = {fit.correlation[i, j]:+.4f})"
+        out.append(text + "; the data hardly constrain it (add test modes or a wider stretch range)")
     if fit.shear_modulus <= 0:
         out.append(f"small-strain shear modulus {fit.shear_modulus:.4g} Pa <= 0: the fit is unstable at rest")
     elif not _PLAUSIBLE_SHEAR[0] <= fit.shear_modulus <= _PLAUSIBLE_SHEAR[1]:

@@ -2,14 +2,11 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from .curves import MODES
-
-if TYPE_CHECKING:
-    from .fit import MaterialFit
 
 __all__ = ["plot_fit"]
 
@@ -26,8 +23,9 @@ def _new_figure(n_panels: int) -> Any:
     return fig
 
 
-def plot_fit(fit: MaterialFit, ax: Any = None) -> Any:
-    """Data (markers) and fit (line) per mode; returns the Figure (see :meth:`MaterialFit.plot`)."""
+def plot_fit(fit: Any, ax: Any = None) -> Any:
+    """Data (markers) and fit (line) of a :class:`~sorofem.fitting.MaterialFit` per mode;
+    returns the Figure (see :meth:`~sorofem.fitting.MaterialFit.plot`)."""
     modes = [m for m in MODES if any(c.mode == m for c in fit.curves)]
     if ax is None:
         fig = _new_figure(len(modes))
