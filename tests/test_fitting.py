@@ -360,6 +360,10 @@ def test_fixed_parameters_and_x0() -> None:
     for name, value in truth.items():
         assert fit.params[name] == pytest.approx(value, rel=1e-8)
     assert "(fixed)" in fit.summary()
+    bounded = fit_material("ogden", data, terms=2, bounds={"alpha:1": (2.0, 3.0)})
+    assert 2.0 <= bounded.params["alpha:1"] <= 3.0 and bounded.params["alpha:1"] == pytest.approx(2.6, rel=1e-8)
+    with pytest.raises(ParameterError, match="bounds leave no non-zero value"):
+        fit_material("ogden", data, terms=1, bounds={"alpha:0": (-1e-4, 1e-4)})
 
 
 def test_unstable_fit_and_implausible_units_warn() -> None:

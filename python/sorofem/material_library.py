@@ -61,9 +61,10 @@ class Source:
     strain_range: tuple[float, float] | None = None
 
     def citation(self) -> str:
-        who = f"{self.authors} " if self.authors else ""
-        when = f"({self.year}). " if self.year else "(undated). "
-        return f"{who}{when}{self.title}. {self.publisher}. {self.location}. {self.url}"
+        """``Authors (year). Title. Publisher. Location. URL`` (title first when no author is named)."""
+        when = str(self.year) if self.year else "undated"
+        head = f"{self.authors} ({when}). {self.title}" if self.authors else f"{self.title} ({when})"
+        return f"{head}. {self.publisher}. {self.location}. {self.url}"
 
 
 @dataclass(frozen=True)

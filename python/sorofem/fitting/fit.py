@@ -120,7 +120,7 @@ class MaterialFit:
                  f"{self.weights} weights",
                  f"  rms residual {self.rms:.3g} Pa ({100 * self.rms_relative:.3g} % relative)"]
         for curve, res in zip(self.curves, self.residuals):
-            lines.append(f"  data {curve.source}: {curve.mode}, {curve.stretch.size} points, stretch "
+            lines.append(f"  curve {curve.source}: {curve.mode}, {curve.stretch.size} points, stretch "
                          f"{curve.stretch.min():.4g}..{curve.stretch.max():.4g}, rms {np.sqrt(np.mean(res**2)):.3g} Pa")
         width = max(len(n) for n in self.params)
         for name, value in self.params.items():
@@ -274,7 +274,8 @@ def fit_material(
         array of positive weights per curve multiplying the residuals in Pa.
     bounds
         ``{name: (lower, upper)}`` for fitted names (default unbounded; Ogden exponents keep
-        the sign of their start and ``1e-3 <= |alpha| <= 40``).
+        the sign of their start and ``1e-3 <= |alpha| <= 40``). Ogden terms come back sorted by
+        increasing exponent unless some are fixed or bounded.
     mode, stress_unit
         For CSV files that do not name their test mode or stress unit.
 
@@ -343,8 +344,11 @@ def fit_material(
     # K); the best few are then converged on the real problem.
     scout = problem if len(starts) == 1 or bulk is None else _Problem(spec, theta, free_idx, curves, scales, None)
     runs = []
-    for start in starts:
-        lo, hi = _start_bounds(spec, free, start, lower, upper)
+    feasible = [(start, box) for start in starts if (box := _start_bounds(spec, free, start, lower, upper))]
+    if not feasible:
+        raise ParameterError("bounds leave no non-zero value for the Ogden exponents (of the sign they start with)",
+                             "bounds")
+    for start, (lo, hi) in feasible:
         runs.append(scout.solve(np.clip(start, lo, hi), lo, hi, max_nfev=60 if len(starts) > 1 else _MAX_NFEV))
     if len(starts) > 1:
         runs.sort(key=lambda r: r.cost if np.isfinite(r.cost) else np.inf)
@@ -358,7 +362,8 @@ def fit_material(
             report={"history": list(problem.history), "message": runs[0].message},
         )
     best = min(converged, key=lambda r: r.cost)
-    x = _ogden_ordered(spec, free, best.x) if spec.name == "ogden" and not fixed else best.x
+    # Sorting the terms would move fixed or bounded values to other names.
+    x = _ogden_ordered(spec, free, best.x) if spec.name == "ogden" and not fixed and not bounds else best.x
     problem.nfev += scout.nfev if scout is not problem else 0
     return problem.result(x, free, weights if isinstance(weights, str) else "given", len(starts))
 
@@ -449,8 +454,9 @@ def _bounds(spec: ModelSpec, free: tuple[str, ...], bounds: Mapping[str, Any] | 
 
 
 def _start_bounds(spec: ModelSpec, free: tuple[str, ...], start: Array, lower: Array, upper: Array
-                  ) -> tuple[Array, Array]:
-    """Ogden exponents stay on the side of zero they start on (W is singular at alpha = 0)."""
+                  ) -> tuple[Array, Array] | None:
+    """Ogden exponents stay on the side of zero they start on (W is singular at alpha = 0);
+    ``None`` when the user's bounds exclude that side."""
     lo, hi = lower.copy(), upper.copy()
     for k, name in enumerate(free):
         if name.startswith("alpha"):
@@ -459,8 +465,7 @@ def _start_bounds(spec: ModelSpec, free: tuple[str, ...], start: Array, lower: A
             else:
                 lo[k], hi[k] = max(lo[k], -_ALPHA_BOUND[1]), min(hi[k], -_ALPHA_BOUND[0])
             if not lo[k] < hi[k]:
-                raise ParameterError(f"bounds[{name!r}] leave no non-zero exponent of the sign of its start "
-                                     f"{start[k]:g}", name)
+                return None
     return lo, hi
 
 
