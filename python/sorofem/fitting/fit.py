@@ -73,6 +73,13 @@ class MaterialFit:
     stable
         Per mode, the Drucker-stable stretch interval of the (incompressible) fitted model,
         or ``None`` when it is unstable at rest.
+    shear_modulus, shear_modulus_error
+        The small-strain shear modulus (Pa) and its standard error (often far better
+        determined than the coefficients it is made of).
+    weights
+        ``"relative"``, ``"absolute"`` or ``"given"``.
+    nfev, starts
+        Residual evaluations over all starts, and the number of starting points.
     warnings
         Things the user should know: parameters that are not identifiable or correlated, data
         outside the stable range, an implausible modulus (wrong stress unit?).
