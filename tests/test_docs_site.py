@@ -98,29 +98,33 @@ def test_no_raw_sphinx_role(pages: dict[str, tuple[str, PageText]]) -> None:
     assert not raw, f"Sphinx roles shown raw: {raw}"
 
 
-def test_roles_became_links(pages: dict[str, tuple[str, PageText]]) -> None:
-    """A few of the docstrings' roles, each as a link to the object's entry."""
-    expected = {
-        # :func:`build_trajectory_view` (same module); :func:`sorofem.simulate` and
-        # :class:`~sorofem.Trajectory` (the package's aliases, documented on another page).
-        "api/viewer/index.html": ['href="#sorofem.viewer.build_trajectory_view"',
-                                  'href="../dynamics/#sorofem.dynamics.simulate"',
-                                  'href="../dynamics/#sorofem.dynamics.Trajectory"'],
-        # :class:`Cable` in Body's docstring (a name the module imports) and :mod:`sorofem.progress`.
-        "api/sorofem/index.html": ['href="../cables/#sorofem.cables.Cable"', 'href="../progress/#sorofem.progress"'],
-    }
-    for page, links in expected.items():
-        html = pages[page][0]
-        for link in links:
-            assert re.search(rf'<a class="autorefs autorefs-internal"[^>]*{re.escape(link)}', html), (page, link)
+ROLE_LINK = re.compile(r'<a class="autorefs autorefs-internal"[^>]*href="(?P<href>[^"]*)"[^>]*><code>(?P<text>[^<]*)</code></a>')
+
+
+def test_roles_became_links(site: Path, pages: dict[str, tuple[str, PageText]]) -> None:
+    """Roles to the objects most docstrings mention are links (a role's link is a code span inside
+    the link; a type annotation's is the other way round), and every link lands on an anchor."""
+    links = [(page, m["href"], m["text"]) for page, (html, _) in pages.items() if page.startswith("api/")
+             for m in ROLE_LINK.finditer(html)]
+    assert len(links) > 100
+    for name in ("solve_static", "simulate", "Trajectory", "Cable", "Mesh"):
+        hits = [href for _, href, text in links
+                if text.removesuffix("()").rsplit(".", 1)[-1] == name and href.endswith("." + name)]
+        assert hits, f"no role links to {name}"
+    for page, href, text in links:
+        path, _, anchor = href.partition("#")
+        target = (site / page).parent / path / "index.html" if path else site / page
+        assert f'id="{anchor}"' in target.resolve().read_text(encoding="utf-8"), f"{page}: {text} -> {href}"
 
 
 def test_literal_blocks_and_definition_lists_render(pages: dict[str, tuple[str, PageText]]) -> None:
-    """sorofem.io's "Formats": a definition list whose ``.tet`` entry holds a literal block."""
-    html = pages["api/io/index.html"][0]
-    assert re.search(r"<dt><code>\.tet</code></dt>\s*<dd>\s*<p>A plain text format[^<]*indices:</p>\s*"
-                     r'<div class="highlight"><pre>', html)
-    assert "::</p>" not in html and "```" not in html
+    """No reStructuredText ``::`` or stray fence is left, and the definition lists of the API pages
+    (sorofem.io's "Formats": a ``.tet`` entry with a literal block) are lists with code inside."""
+    api = {page: html for page, (html, _) in pages.items() if page.startswith("api/")}
+    for page, html in api.items():
+        assert "::</p>" not in html and "```" not in html, page
+    definitions = [d for html in api.values() for d in re.findall(r"<dl>.*?</dl>", html, flags=re.S)]
+    assert any('<div class="highlight"><pre>' in d for d in definitions)
 
 
 def test_no_tex_left_unrendered(pages: dict[str, tuple[str, PageText]]) -> None:
