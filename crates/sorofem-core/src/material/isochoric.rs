@@ -159,33 +159,41 @@ pub fn add_bar_i2_hessian(kin: &Kinematics, i2: &BarInvariant, coeff: f64, t: &m
     let f = &kin.f;
     let c = f.transpose() * f;
     let b = f * f.transpose();
-    let i1 = c.trace();
     let j43 = kin.j23 * kin.j23;
     let g = flat(&kin.g);
     let a2 = flat(&i2.gradient);
     let ff = flat(f);
-    let c_t = 4.0 / 3.0 * i2.value;
-    let c_gg = -16.0 / 9.0 * i2.value;
+    let c_t = coeff * 4.0 / 3.0 * i2.value;
+    let c_swap = -2.0 * coeff * j43;
+    // The outer products grouped by row factor: g_a u_b + a2_a w_b + F_a z_b.
+    let u: [f64; 9] =
+        std::array::from_fn(|k| coeff * (-16.0 / 9.0 * i2.value * g[k] - 4.0 / 3.0 * a2[k]));
+    let w: [f64; 9] = std::array::from_fn(|k| coeff * -4.0 / 3.0 * g[k]);
+    let z: [f64; 9] = std::array::from_fn(|k| 4.0 * coeff * j43 * ff[k]);
     for k in 0..3 {
         for l in 0..3 {
             let col = 3 * k + l;
             for i in 0..3 {
                 for j in 0..3 {
                     let row = 3 * i + j;
-                    let mut d2i2 = 4.0 * ff[row] * ff[col] - 2.0 * ff[3 * i + l] * ff[3 * k + j];
-                    if i == k {
-                        d2i2 -= 2.0 * c[(l, j)];
-                    }
-                    if j == l {
-                        d2i2 -= 2.0 * b[(i, k)];
-                        if i == k {
-                            d2i2 += 2.0 * i1;
-                        }
-                    }
-                    t[(row, col)] += coeff
-                        * (j43 * d2i2 + c_t * g[3 * i + l] * g[3 * k + j] + c_gg * g[row] * g[col]
-                            - 4.0 / 3.0 * (a2[row] * g[col] + g[row] * a2[col]));
+                    t[(row, col)] += g[row] * u[col]
+                        + a2[row] * w[col]
+                        + ff[row] * z[col]
+                        + c_t * g[3 * i + l] * g[3 * k + j]
+                        + c_swap * ff[3 * i + l] * ff[3 * k + j];
                 }
+            }
+        }
+    }
+    // The Kronecker-delta terms 2 I1 δ_ik δ_jl - 2 δ_ik C_lj - 2 B_ik δ_jl, on their support only.
+    let diagonal = 2.0 * coeff * j43 * c.trace();
+    for i in 0..3 {
+        for j in 0..3 {
+            let row = 3 * i + j;
+            t[(row, row)] += diagonal;
+            for m in 0..3 {
+                t[(row, 3 * i + m)] += c_swap * c[(m, j)];
+                t[(row, 3 * m + j)] += c_swap * b[(i, m)];
             }
         }
     }

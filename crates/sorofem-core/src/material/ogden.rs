@@ -32,9 +32,9 @@
 use super::isochoric::{check_d1, check_params};
 use super::law::{Hyperelastic, RestParamGradient};
 use super::neo_hookean::{j_minus_one, Response};
-use super::{Mat3, Tangent, Volumetric};
+use super::{symmetric_eigenvalues, Mat3, Tangent, Volumetric};
 use crate::error::{Error, Result};
-use nalgebra::SymmetricEigen;
+use nalgebra::{SymmetricEigen, Vector3};
 
 const MAX_TERMS: usize = 3;
 const NAMES: [[&str; 2]; MAX_TERMS] = [
@@ -168,10 +168,9 @@ impl Principal {
         if jm1.is_nan() || jm1 <= -1.0 {
             return None;
         }
-        let e = h + h.transpose() + h.transpose() * h;
-        let eig = SymmetricEigen::new(e);
+        let (c_minus_1, v) = symmetric_eigen(&(h + h.transpose() + h.transpose() * h));
         let mut log_stretch = [0.0; 3];
-        for (l, &c_minus_1) in log_stretch.iter_mut().zip(eig.eigenvalues.iter()) {
+        for (l, &c_minus_1) in log_stretch.iter_mut().zip(c_minus_1.iter()) {
             if c_minus_1.is_nan() || c_minus_1 <= -1.0 {
                 return None;
             }
@@ -180,8 +179,8 @@ impl Principal {
         let mean = log_stretch.iter().sum::<f64>() / 3.0;
         Some(Principal {
             f: Mat3::identity() + h,
-            v: eig.eigenvectors,
-            stretch: log_stretch.map(f64::exp),
+            v,
+            stretch: c_minus_1.map(|x| (1.0 + x).sqrt()),
             log_stretch,
             deviatoric: log_stretch.map(|l| l - mean),
         })
@@ -195,17 +194,95 @@ impl Principal {
     }
 }
 
-/// `e^u - 1 - u` without cancellation for small |u| (Taylor series below 1/2).
+/// Eigenvalues and orthonormal eigenvectors (columns, same order) of a symmetric 3x3 matrix.
+///
+/// The technique of [`super::rotation_svd`], applied to `E = C - I` (so that small strains keep
+/// their relative precision): the best separated eigenvector from cross products of the rows of
+/// `E - lambda I`, the other two by a Jacobi rotation in the orthogonal plane (accurate however
+/// close they are), the eigenvalues as Rayleigh quotients. An eigenvector's error, of order
+/// `eps |E| / gap`, moves the stress by that times the gap, so it stays at round-off; only when
+/// all three eigenvalues agree to 1e-6 relative does the iterative solver take over.
+fn symmetric_eigen(e: &Mat3) -> ([f64; 3], Mat3) {
+    let estimates = symmetric_eigenvalues(e);
+    let spread = estimates[0] - estimates[2];
+    let scale = estimates[0].abs().max(estimates[2].abs());
+    if spread > 1e-6 * scale {
+        if let Some(decomposition) = closed_form_eigen(e, &estimates) {
+            return decomposition;
+        }
+    }
+    let eig = SymmetricEigen::new(*e);
+    (eig.eigenvalues.into(), eig.eigenvectors)
+}
+
+fn closed_form_eigen(e: &Mat3, estimates: &[f64; 3]) -> Option<([f64; 3], Mat3)> {
+    let [largest, middle, smallest] = *estimates;
+    let null_vector = |lambda: f64| -> Option<Vector3<f64>> {
+        let m = e - Mat3::identity() * lambda;
+        let rows = [
+            m.row(0).transpose(),
+            m.row(1).transpose(),
+            m.row(2).transpose(),
+        ];
+        let best = [
+            rows[0].cross(&rows[1]),
+            rows[0].cross(&rows[2]),
+            rows[1].cross(&rows[2]),
+        ]
+        .into_iter()
+        .max_by(|a, b| a.norm_squared().total_cmp(&b.norm_squared()))?;
+        let norm = best.norm();
+        (norm > 0.0 && norm.is_finite()).then(|| best / norm)
+    };
+    let first = null_vector(if largest - middle >= middle - smallest {
+        largest
+    } else {
+        smallest
+    })?;
+    let first = null_vector(first.dot(&(e * first))).unwrap_or(first);
+    let helper = if first.x.abs() < 0.6 {
+        Vector3::x()
+    } else {
+        Vector3::y()
+    };
+    let e1 = (helper - first * first.dot(&helper)).normalize();
+    let e2 = first.cross(&e1);
+    let (ee1, ee2) = (e * e1, e * e2);
+    let (a, b, d) = (e1.dot(&ee1), e1.dot(&ee2), e2.dot(&ee2));
+    let (sin, cos) = (0.5 * (2.0 * b).atan2(a - d)).sin_cos();
+    let second = e1 * cos + e2 * sin;
+    let third = e2 * cos - e1 * sin;
+    let rayleigh = |v: &Vector3<f64>| v.dot(&(e * v));
+    Some((
+        [rayleigh(&first), rayleigh(&second), rayleigh(&third)],
+        Mat3::from_columns(&[first, second, third]),
+    ))
+}
+
+/// `1/k!` for k = 2..=17.
+const INVERSE_FACTORIALS: [f64; 16] = {
+    let mut c = [0.0; 16];
+    let mut factorial = 1.0;
+    let mut k = 2;
+    while k <= 17 {
+        factorial *= k as f64;
+        c[k - 2] = 1.0 / factorial;
+        k += 1;
+    }
+    c
+};
+
+/// `e^u - 1 - u` without cancellation for small |u| (Taylor series below 1/2, whose dropped
+/// terms are below 1e-17 relative there).
 fn exp_m1_minus_arg(u: f64) -> f64 {
     if u.abs() >= 0.5 {
         return u.exp_m1() - u;
     }
-    // Horner form of sum_{k=2..18} u^k / k!; the dropped terms are below 1e-17 relative.
-    let mut sum = 0.0;
-    for k in (2..=18).rev() {
-        sum = (sum + 1.0) * u / k as f64;
-    }
-    sum * u
+    let tail = INVERSE_FACTORIALS
+        .iter()
+        .rev()
+        .fold(0.0, |sum, &c| sum * u + c);
+    tail * u * u
 }
 
 /// `sinh(beta u / 2) / sinh(u / 2)`, `beta` at `u = 0`: the divided difference
@@ -272,9 +349,8 @@ impl Hyperelastic for Ogden {
                 }
                 for (k, &(a, b)) in PAIRS.iter().enumerate() {
                     let u = pr.log_stretch[a] - pr.log_stretch[b];
-                    flip[k] += c
-                        * ((0.5 * alpha * (lbar[a] + lbar[b])).exp() * sinh_ratio(alpha - 1.0, u)
-                            + s_bar / 3.0);
+                    flip[k] +=
+                        c * ((e[a] * e[b]).sqrt() * sinh_ratio(alpha - 1.0, u) + s_bar / 3.0);
                 }
             }
         }
@@ -282,30 +358,45 @@ impl Hyperelastic for Ogden {
         let tangent = with_tangent.then(|| {
             let s = &pr.stretch;
             let psi = [tau[0] / s[0], tau[1] / s[1], tau[2] / s[2]];
-            // The tangent in the basis u_a v_b^T (index 3a + b), then rotated: A = E M E^T with
-            // E = U ⊗ V, whose columns are the flattened u_a v_b^T.
-            let mut m = Tangent::zeros();
-            for a in 0..3 {
-                for b in 0..3 {
-                    m[(4 * a, 4 * b)] = dtau[a][b] / (s[a] * s[b]);
+            let inv = Vector3::from_fn(|i, _| 1.0 / s[i]);
+            let u = pr.f * pr.v * Mat3::from_diagonal(&inv);
+            // The basis u_a v_b^T (index 3a + b), flattened: basis[3a + b][3i + j] = U_ia V_jb.
+            let basis: [[f64; 9]; 9] = std::array::from_fn(|x| {
+                std::array::from_fn(|r| u[(r / 3, x / 3)] * pr.v[(r % 3, x % 3)])
+            });
+            // A = E M E^T with E = [basis] and M the block-diagonal tangent in that basis; the
+            // columns of E M first (M has at most three nonzeros per column), then A by symmetry.
+            let mut em = [[0.0; 9]; 9];
+            for b in 0..3 {
+                for a in 0..3 {
+                    let mut m_ab = dtau[a][b] / (s[a] * s[b]);
+                    if a == b {
+                        m_ab -= psi[a] / s[a];
+                    }
+                    for r in 0..9 {
+                        em[4 * b][r] += m_ab * basis[4 * a][r];
+                    }
                 }
-                m[(4 * a, 4 * a)] -= psi[a] / s[a];
             }
             for (k, &(a, b)) in PAIRS.iter().enumerate() {
                 let flip = flip[k] / (s[a] * s[b]);
                 let twist = (psi[a] + psi[b]) / (s[a] + s[b]);
+                let (same, swapped) = (0.5 * (flip + twist), 0.5 * (flip - twist));
                 let (ab, ba) = (3 * a + b, 3 * b + a);
-                let same = 0.5 * (flip + twist);
-                let swapped = 0.5 * (flip - twist);
-                m[(ab, ab)] = same;
-                m[(ba, ba)] = same;
-                m[(ab, ba)] = swapped;
-                m[(ba, ab)] = swapped;
+                for r in 0..9 {
+                    em[ab][r] = same * basis[ab][r] + swapped * basis[ba][r];
+                    em[ba][r] = same * basis[ba][r] + swapped * basis[ab][r];
+                }
             }
-            let inv = nalgebra::Vector3::from_fn(|i, _| 1.0 / s[i]);
-            let u = pr.f * pr.v * Mat3::from_diagonal(&inv);
-            let e = u.kronecker(&pr.v);
-            e * m * e.transpose()
+            let mut t = Tangent::zeros();
+            for col in 0..9 {
+                for row in 0..=col {
+                    let value = (0..9).map(|x| em[x][row] * basis[x][col]).sum::<f64>();
+                    t[(row, col)] = value;
+                    t[(col, row)] = value;
+                }
+            }
+            t
         });
         Some(Response {
             energy,
