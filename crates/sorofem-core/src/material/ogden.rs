@@ -97,12 +97,10 @@ impl Ogden {
         }
         let shear: f64 = model.mu().iter().sum();
         if shear <= 0.0 {
+            let moduli: Vec<&str> = NAMES[..terms].iter().map(|[mu, _]| *mu).collect();
             return Err(Error::invalid(
                 "mu:0",
-                format!(
-                    "mu:0 + ... + mu:{} > 0 in Pa (the shear modulus)",
-                    terms - 1
-                ),
+                format!("{} > 0 in Pa (the shear modulus)", moduli.join(" + ")),
                 format!("a sum of {shear}"),
             ));
         }
@@ -189,7 +187,7 @@ impl Principal {
     /// `F V diag(s_i / λ_i^2) V^T`: the stress `U diag(s_i / λ_i) V^T` of principal Kirchhoff
     /// values `s_i`, without forming U.
     fn stress(&self, s: &[f64; 3]) -> Mat3 {
-        let d = nalgebra::Vector3::from_fn(|i, _| s[i] / (self.stretch[i] * self.stretch[i]));
+        let d = Vector3::from_fn(|i, _| s[i] / (self.stretch[i] * self.stretch[i]));
         self.f * self.v * Mat3::from_diagonal(&d) * self.v.transpose()
     }
 }
