@@ -7,7 +7,7 @@ BUILD_STAMP := $(VENV)/.build-stamp
 DOCS_STAMP := $(VENV)/.docs-stamp
 RUST_SOURCES := $(shell find crates -name '*.rs' -o -name Cargo.toml) Cargo.toml pyproject.toml
 
-.PHONY: demo test test-rust test-python test-all bench build fmt clean docs test-viewer
+.PHONY: demo test test-rust test-python test-all bench build fmt clean docs test-viewer generate
 
 $(STAMP): pyproject.toml
 	@command -v $(PYTHON) >/dev/null || { echo "error: $(PYTHON) not found (set PYTHON=...)"; exit 1; }
@@ -59,6 +59,11 @@ test-viewer: build
 
 fmt:
 	cargo fmt --all
+
+# The copies generated from the scene spec (docs/scene.schema.json, README.md's key table, the
+# sorofem.scene docstring); the tests fail when they are stale.
+generate: build
+	$(PY) -m sorofem.scene.generate
 
 clean:
 	rm -rf target $(VENV) results
