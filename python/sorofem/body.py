@@ -371,7 +371,7 @@ class Body:
     _core_model = core_model
 
     def _built_model(self) -> Any:
-        key = (self._fixed.tobytes(), len(self._cables), self._formulation, self._volumetric, self._pressure_mass)
+        key = (self._fixed.tobytes(), len(self._cables), self._formulation, tuple(self.formulation_options.items()))
         if self._model is None or self._model_key != key:
             cables = [c.to_core(alpha) | {"stiffness": k}
                       for c, alpha, k in zip(self._cables, self._actuations, self._stiffnesses)]

@@ -27,7 +27,6 @@ Examples
 
 from __future__ import annotations
 
-import math
 import numbers
 import os
 import re

@@ -403,6 +403,30 @@ def _plain(value: Any) -> Any:
     return float(value) if np.ndim(value) == 0 else value
 
 
+#: The material class of each model, by the model's name (filled as the classes are defined).
+CLASSES: dict[str, type[Material]] = {}
+
+
+def material_class(name: str) -> type[Material]:
+    """The class of the model called ``name`` (:class:`NeoHookean` for ``"neo-hookean"``).
+
+    Raises
+    ------
+    ParameterError
+        No such model.
+    """
+    if name not in CLASSES:
+        raise ParameterError(f"model: expected one of {list(CLASSES)}, got {name!r}", "model")
+    return CLASSES[name]
+
+
+def _getter(p: Parameter) -> Callable[[Material], Any]:
+    def get(self: Material) -> Any:
+        return self.value(p.name)
+
+    return get
+
+
 class Material:
     """Values of one :class:`MaterialModel`'s parameters, each a scalar or a per-element array.
 
@@ -513,9 +537,8 @@ class Material:
             shown = blame.get(name, name)
             bad = float(value[~strict.contains(value)][0])
             raise ParameterError(
-                f"{shown}: formulation={formulation!r} needs {name} {strict.describe()}"
-                + (f" ({parameter.symbol} {strict.describe()})" if shown == name else "")
-                + f", got {name} = {bad} {parameter.units}; {strict.low_note or strict.high_note}",
+                f"{shown}: formulation={formulation!r} needs {name} {strict.describe()} in every element, got "
+                f"{name} = {bad} {parameter.units}; {strict.low_note or strict.high_note}",
                 shown,
             )
 
@@ -535,30 +558,6 @@ class Material:
 
         args = ", ".join(f"{name}={fmt(value)}" for name, value in self.given().items())
         return f"{type(self).__name__}({args})"
-
-
-#: The material class of each model, by the model's name (filled as the classes are defined).
-CLASSES: dict[str, type[Material]] = {}
-
-
-def material_class(name: str) -> type[Material]:
-    """The class of the model called ``name`` (:class:`NeoHookean` for ``"neo-hookean"``).
-
-    Raises
-    ------
-    ParameterError
-        No such model.
-    """
-    if name not in CLASSES:
-        raise ParameterError(f"model: expected one of {list(CLASSES)}, got {name!r}", "model")
-    return CLASSES[name]
-
-
-def _getter(p: Parameter) -> Callable[[Material], Any]:
-    def get(self: Material) -> Any:
-        return self.value(p.name)
-
-    return get
 
 
 class NeoHookean(Material, model=NEO_HOOKEAN):
