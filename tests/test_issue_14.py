@@ -133,3 +133,11 @@ def test_one_conversion_of_youngs_modulus_and_poisson_ratio():
     fd = check_jacobian(lambda x: np.array(lame_from_young(*x), dtype=float), np.array([E, nu]), jacobian,
                         step=1e-6, rtol=1e-6)
     assert fd.passed, str(fd)
+
+
+def test_inverse_docstring_lists_every_parameter_name():
+    """The table of sorofem.inverse's docstring is written by hand: it must name every parameter
+    the declaration gives (sorofem.inverse.PARAMETERS)."""
+    doc = sf.inverse.__doc__ or ""
+    missing = [name for name in sf.inverse.PARAMETERS if f"``{name}``" not in doc]
+    assert not missing, f"sorofem.inverse's docstring table lacks {missing}"
