@@ -11,7 +11,7 @@ RUST_SOURCES := $(shell find crates -name '*.rs' -o -name Cargo.toml) Cargo.toml
 requirements = $(shell $(PYTHON) -c 'import shlex, sys, tomllib; p = tomllib.load(open("pyproject.toml", "rb"))["project"]; \
 	print(shlex.join(p["optional-dependencies"][sys.argv[1]] if sys.argv[1] else p["dependencies"]))' '$(1)')
 
-.PHONY: demo test test-rust test-python test-all bench build fmt clean docs test-viewer wheel test-wheel
+.PHONY: demo test test-rust test-python test-all bench build fmt clean docs test-viewer wheel test-wheel generate
 
 $(STAMP): pyproject.toml
 	@command -v $(PYTHON) >/dev/null || { echo "error: $(PYTHON) not found (set PYTHON=...)"; exit 1; }
@@ -76,6 +76,11 @@ test-viewer: build
 
 fmt:
 	cargo fmt --all
+
+# The copies generated from the scene spec (docs/scene.schema.json, README.md's key table, the
+# sorofem.scene docstring); the tests fail when they are stale.
+generate: build
+	$(PY) -m sorofem.scene.generate
 
 clean:
 	rm -rf target $(VENV) results dist
