@@ -139,7 +139,7 @@ def stable_range(model: str, mode: str, params: Mapping[str, float], *, terms: i
     """The Drucker-stable stretch interval of the incompressible model in ``mode`` (see
     :func:`sorofem.fitting.curves.drucker_eigenvalue`), ``None`` if unstable at rest."""
     spec, theta, _ = _theta(model, params, terms, None)
-    return _curves.stable_range(spec, theta, _curves._check_mode(mode))
+    return _curves.stable_range(spec, theta, _curves.check_mode(mode))
 
 
 def _stretch(stretch: Any) -> np.ndarray:

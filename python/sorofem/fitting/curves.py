@@ -51,7 +51,7 @@ _INCOMPRESSIBLE = {"uniaxial": -0.5, "equibiaxial": -2.0, "planar": -1.0}
 DRUCKER_RANGE = (0.1, 10.0)
 
 
-def _check_mode(mode: str) -> str:
+def check_mode(mode: str) -> str:
     if mode not in MODES:
         raise ParameterError(f"unknown test mode {mode!r}; expected one of {', '.join(MODES)}", "mode")
     return mode
@@ -63,7 +63,7 @@ def _log_stretches(mode: str, log_stretch: Array, log_lateral: Array) -> Array:
 
 def incompressible_lateral(mode: str, stretch: Array) -> Array:
     """The lateral stretch ``t`` that keeps ``J = 1``."""
-    return np.asarray(stretch, dtype=np.float64) ** _INCOMPRESSIBLE[_check_mode(mode)]
+    return np.asarray(stretch, dtype=np.float64) ** _INCOMPRESSIBLE[check_mode(mode)]
 
 
 def lateral_log_stretch(spec: ModelSpec, theta: Array, mode: str, stretch: Array, bulk: float,
@@ -80,7 +80,7 @@ def lateral_log_stretch(spec: ModelSpec, theta: Array, mode: str, stretch: Array
         No lateral stretch in ``[lambda_incompressible e^-5, lambda_incompressible e^5]`` frees
         direction 3 of traction.
     """
-    _check_mode(mode)
+    check_mode(mode)
     log_stretch = np.log(np.asarray(stretch, dtype=np.float64))
     s = _INCOMPRESSIBLE[mode] * log_stretch
     lateral = _LATERAL[mode]
@@ -134,7 +134,7 @@ def nominal_stress(spec: ModelSpec, theta: Array, mode: str, stretch: Array, bul
     ``bulk=None`` is the incompressible closed form; otherwise the lateral stretch is solved
     for zero lateral traction (:func:`lateral_log_stretch`).
     """
-    _check_mode(mode)
+    check_mode(mode)
     stretch = np.asarray(stretch, dtype=np.float64)
     log_stretch = np.log(stretch)
     if bulk is None:
@@ -162,7 +162,7 @@ def drucker_eigenvalue(spec: ModelSpec, theta: Array, mode: str, stretch: Array)
     W in the two free log-strains: the material is Drucker stable at that state when D is
     positive definite (Abaqus Theory Manual, "Hyperelastic material behavior").
     """
-    _check_mode(mode)
+    check_mode(mode)
     log_stretch = np.log(np.asarray(stretch, dtype=np.float64))
     eps = _log_stretches(mode, log_stretch, _INCOMPRESSIBLE[mode] * log_stretch)
     _, h, _ = kirchhoff(spec, theta, eps, None)
