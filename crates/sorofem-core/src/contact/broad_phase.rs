@@ -82,6 +82,8 @@ const LEAF_SIZE: usize = 4;
 pub struct Bvh {
     nodes: Vec<Node>,
     items: Vec<u32>,
+    /// The boxes in the order of `items`.
+    boxes: Vec<Aabb>,
 }
 
 struct Node {
@@ -97,6 +99,7 @@ impl Bvh {
         let mut bvh = Bvh {
             nodes: Vec::with_capacity(2 * boxes.len() / LEAF_SIZE + 1),
             items: (0..boxes.len() as u32).collect(),
+            boxes: Vec::new(),
         };
         let centers: Vec<Vec3> = boxes.iter().map(Aabb::center).collect();
         bvh.nodes.push(Node {
@@ -107,6 +110,7 @@ impl Bvh {
         if !boxes.is_empty() {
             bvh.build(0, 0, boxes.len(), boxes, &centers);
         }
+        bvh.boxes = bvh.items.iter().map(|&i| boxes[i as usize]).collect();
         bvh
     }
 
@@ -159,8 +163,11 @@ impl Bvh {
                 continue;
             }
             if node.count > 0 {
-                for &i in &self.items[node.start as usize..(node.start + node.count) as usize] {
-                    hit(i as usize);
+                let leaf = node.start as usize..(node.start + node.count) as usize;
+                for (&i, aabb) in self.items[leaf.clone()].iter().zip(&self.boxes[leaf]) {
+                    if aabb.overlaps(query) {
+                        hit(i as usize);
+                    }
                 }
             } else {
                 stack[top] = node.start;
