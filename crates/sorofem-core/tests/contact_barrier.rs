@@ -10,7 +10,8 @@ use sorofem_core::contact::broad_phase::candidates;
 use sorofem_core::contact::distance::Vec3;
 use sorofem_core::contact::potential::{candidate_squared_distance, is_mollified};
 use sorofem_core::contact::{
-    project_to_psd, BarrierPotential, Candidate, CollisionMesh, Obstacle, Plane, Sphere,
+    project_to_psd, project_translation_invariant_to_psd, symmetric_eigen, BarrierPotential,
+    Candidate, CollisionMesh, Obstacle, Plane, Sphere,
 };
 use sorofem_core::energy::HessianMode;
 
@@ -279,6 +280,56 @@ fn stencil_derivatives_match_finite_differences() {
     }
 }
 
+/// The fixed-size eigensolver reconstructs random, rank-deficient and repeated-eigenvalue
+/// symmetric matrices with orthonormal eigenvectors.
+#[test]
+fn symmetric_eigensolver() {
+    let mut rng = Rng::new(13);
+    let check = |a: &SMatrix<f64, 12, 12>, name: &str| {
+        let rows: [[f64; 12]; 12] = std::array::from_fn(|i| std::array::from_fn(|j| a[(i, j)]));
+        let (w, q) = symmetric_eigen(&rows);
+        let q = SMatrix::<f64, 12, 12>::from_fn(|i, j| q[i][j]);
+        let w = SMatrix::<f64, 12, 12>::from_diagonal(&w.into());
+        let scale = a.abs().max().max(1e-300);
+        assert!(
+            (q * w * q.transpose() - a).abs().max() <= 1e-13 * scale,
+            "{name}: reconstruction"
+        );
+        assert!(
+            (q.transpose() * q - SMatrix::<f64, 12, 12>::identity())
+                .abs()
+                .max()
+                <= 1e-13,
+            "{name}: orthonormality"
+        );
+    };
+    for trial in 0..100 {
+        let a = SMatrix::<f64, 12, 12>::from_fn(|_, _| rng.next());
+        check(&(a + a.transpose()), &format!("random {trial}"));
+        let b = SMatrix::<f64, 4, 12>::from_fn(|_, _| rng.next());
+        check(&(b.transpose() * b), &format!("rank 4, {trial}"));
+        // Eigenvalues -1 (x3), 0 (x5), 2 (x4) in a random basis.
+        let sym = a + a.transpose();
+        let rows: [[f64; 12]; 12] = std::array::from_fn(|i| std::array::from_fn(|j| sym[(i, j)]));
+        let (_, basis) = symmetric_eigen(&rows);
+        let v = SMatrix::<f64, 12, 12>::from_fn(|i, j| basis[i][j]);
+        let d = SMatrix::<f64, 12, 12>::from_fn(|i, j| {
+            if i != j {
+                0.0
+            } else if i < 3 {
+                -1.0
+            } else if i < 8 {
+                0.0
+            } else {
+                2.0
+            }
+        });
+        check(&(v * d * v.transpose()), &format!("repeated {trial}"));
+    }
+    check(&SMatrix::<f64, 12, 12>::zeros(), "zero");
+    check(&SMatrix::<f64, 12, 12>::identity(), "identity");
+}
+
 #[test]
 fn projection_clamps_negative_eigenvalues_and_keeps_psd_matrices() {
     let mut rng = Rng::new(11);
@@ -298,6 +349,36 @@ fn projection_clamps_negative_eigenvalues_and_keeps_psd_matrices() {
         let mut projected = psd;
         project_to_psd(&mut projected);
         assert!((projected - psd).abs().max() <= 1e-12 * psd.abs().max());
+        // A matrix zero on rigid translations (as distance Hessians are): the reduced
+        // projection equals the full one.
+        let mut c = SMatrix::<f64, 12, 9>::zeros();
+        for a in 0..3 {
+            for i in 0..3 {
+                for p in 0..4 {
+                    // Column (a, i) of a basis orthogonal to translations: point weights summing to 0.
+                    let weight = [
+                        [1.0, -1.0, 0.0, 0.0],
+                        [0.5, 0.5, -2.0, 1.0],
+                        [0.3, -1.2, 0.2, 0.7],
+                    ][a][p];
+                    c[(3 * p + i, 3 * a + i)] = weight * (1.0 + 0.1 * rng.next());
+                }
+            }
+        }
+        // Re-centre each column's point weights so they sum to zero exactly.
+        for col in 0..9 {
+            let i = col % 3;
+            let mean = (0..4).map(|p| c[(3 * p + i, col)]).sum::<f64>() / 4.0;
+            for p in 0..4 {
+                c[(3 * p + i, col)] -= mean;
+            }
+        }
+        let core = SMatrix::<f64, 9, 9>::from_fn(|_, _| rng.next());
+        let invariant = c * (core + core.transpose()) * c.transpose();
+        let (mut full, mut reduced) = (invariant, invariant);
+        project_to_psd(&mut full);
+        project_translation_invariant_to_psd(&mut reduced);
+        assert!((full - reduced).abs().max() <= 1e-12 * invariant.abs().max());
     }
 }
 

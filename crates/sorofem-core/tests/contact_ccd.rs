@@ -254,7 +254,7 @@ fn grazing_and_parallel_motions_are_conservative_and_terminate() {
         }
     });
     let t = edge_edge_toi(&x, &press, eta).expect("touches at 0.5");
-    assert!(t <= 0.5 && t >= 0.4, "{t}");
+    assert!((0.4..=0.5).contains(&t), "{t}");
     // Grazing a sphere delta away from its surface: no contact, but the distance drops below
     // eta d0, where the step stops.
     let sphere = Sphere::try_new([0.0; 3], 1.0).unwrap();
@@ -283,10 +283,10 @@ fn max_step_keeps_the_whole_configuration_apart() {
     let eta = DEFAULT_MIN_SEPARATION;
     // Falling 50 mm onto the plane 2 mm below (contact at 0.04), or moving 10 mm sideways into
     // the box 3 mm away (contact at 0.3), or both with a twist.
-    let motions: Vec<Box<dyn Fn(&Vec3) -> Vec3>> = vec![
-        Box::new(|_| Vec3::new(0.0, 0.0, -0.05)),
-        Box::new(|_| Vec3::new(0.01, 0.0, 0.0)),
-        Box::new(|p| Vec3::new(0.01 + 0.1 * (p[2] - 0.05), 0.02 * p[0], -0.004)),
+    let motions: [fn(&Vec3) -> Vec3; 3] = [
+        |_| Vec3::new(0.0, 0.0, -0.05),
+        |_| Vec3::new(0.01, 0.0, 0.0),
+        |p| Vec3::new(0.01 + 0.1 * (p[2] - 0.05), 0.02 * p[0], -0.004),
     ];
     for (k, motion) in motions.iter().enumerate() {
         let dx: Vec<Vec3> = x0

@@ -98,7 +98,7 @@ fn lagged_frames_and_stencil_derivatives() {
             let (ids, n) = c.vertices();
             let local_t: Vec<Vec3> = ids[..n].iter().map(|&i| x_t[i]).collect();
             let d = candidate_squared_distance(&mesh, c, &local_t);
-            if counts[slot] >= 20 || d < 1e-3 || d > 0.2 {
+            if counts[slot] >= 20 || !(1e-3..=0.2).contains(&d) {
                 continue;
             }
             let stencil = FrictionStencil::lag(&mesh, c, &x_t, &barrier, 0.4).unwrap();

@@ -21,32 +21,11 @@ pub mod distance;
 pub mod friction;
 pub mod obstacle;
 pub mod potential;
+mod psd;
 
 pub use barrier::StiffnessBounds;
 pub use collision_mesh::{Candidate, CollisionMesh};
 pub use distance::{Feature, Vec3};
 pub use obstacle::{Obstacle, ObstacleMesh, Plane, Sphere};
 pub use potential::BarrierPotential;
-
-use nalgebra::{DMatrix, SMatrix, SymmetricEigen};
-
-/// Clamps the negative eigenvalues of a symmetric matrix to zero, in place (unchanged when it is
-/// already positive semi-definite): IPC's projection of each stencil Hessian, so that the
-/// assembled Hessian gives a descent direction.
-pub fn project_to_psd<const N: usize>(h: &mut SMatrix<f64, N, N>) {
-    // Positive definite stencils (about half of the barrier's) skip the eigendecomposition.
-    if nalgebra::linalg::Cholesky::new(*h).is_some() {
-        return;
-    }
-    let eig = SymmetricEigen::new(DMatrix::from_column_slice(N, N, h.as_slice()));
-    if eig.eigenvalues.iter().all(|&l| l >= 0.0) {
-        return;
-    }
-    let mut clamped = eig.eigenvectors.clone();
-    for (k, &l) in eig.eigenvalues.iter().enumerate() {
-        let scale = l.max(0.0);
-        clamped.column_mut(k).scale_mut(scale);
-    }
-    let projected = clamped * eig.eigenvectors.transpose();
-    h.copy_from_slice(projected.as_slice());
-}
+pub use psd::{project_to_psd, project_translation_invariant_to_psd, symmetric_eigen};

@@ -16,7 +16,7 @@ use super::distance::{
     point_plane_distance_derivatives, point_point_distance_derivatives, point_triangle_feature,
     Derivatives, Feature, Vec3,
 };
-use super::project_to_psd;
+use super::psd::project_translation_invariant_to_psd;
 use crate::energy::HessianMode;
 use crate::error::{Error, Result};
 use nalgebra::Matrix3;
@@ -133,7 +133,7 @@ impl BarrierPotential {
                     + b.gradient * m.gradient.transpose()
                     + m.hessian * b.value;
                 if mode == HessianMode::Projected {
-                    project_to_psd(&mut hessian);
+                    project_translation_invariant_to_psd(&mut hessian);
                 }
                 let mollified = Derivatives {
                     value: m.value * b.value,
@@ -212,7 +212,7 @@ impl BarrierPotential {
         );
         let mut hessian = d.gradient * d.gradient.transpose() * (k * d2b) + d.hessian * (k * db);
         if mode == HessianMode::Projected {
-            project_to_psd(&mut hessian);
+            project_translation_invariant_to_psd(&mut hessian);
         }
         Derivatives {
             value: k * barrier(d.value, dhat2),
