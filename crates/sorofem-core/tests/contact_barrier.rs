@@ -416,7 +416,7 @@ fn assembled_gradient_and_hessian_match_finite_differences() {
         1e-8,
     );
     let mut dense = vec![0.0; n * n];
-    for &(r, c, v) in &assembled.hessian {
+    for (r, c, v) in assembled.hessians.iter().flat_map(|h| h.entries()) {
         if r < n && c < n {
             dense[r * n + c] += v;
         }

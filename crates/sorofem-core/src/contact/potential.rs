@@ -29,13 +29,37 @@ pub struct BarrierPotential {
     stiffness: f64,
 }
 
-/// Energy (J), gradient over all vertices (`3 n_vertices`, N) and Hessian entries
-/// `(row, column, value)` (N/m; every entry of every active stencil, duplicates to be summed).
+/// Energy (J), gradient over all vertices (`3 n_vertices`, N) and the Hessians of the active
+/// stencils (N/m), as [`BarrierPotential::assemble`] returns them.
 #[derive(Clone, Debug, Default)]
 pub struct Assembled {
     pub energy: f64,
     pub gradient: Vec<f64>,
-    pub hessian: Vec<(usize, usize, f64)>,
+    pub hessians: Vec<StencilHessian>,
+}
+
+/// The Hessian of one stencil: `3 n x 3 n` row-major in the first `9 n^2` entries of `values`,
+/// over the coordinates of `candidate.vertices()`.
+#[derive(Clone, Debug)]
+pub struct StencilHessian {
+    pub candidate: Candidate,
+    pub values: [f64; 144],
+}
+
+impl StencilHessian {
+    /// `(row, column, value)` in the global numbering `3 v + k` of [`CollisionMesh`].
+    pub fn entries(&self) -> impl Iterator<Item = (usize, usize, f64)> + '_ {
+        let (ids, n) = self.candidate.vertices();
+        let size = 3 * n;
+        (0..size * size).map(move |k| {
+            let (r, c) = (k / size, k % size);
+            (
+                3 * ids[r / 3] + r % 3,
+                3 * ids[c / 3] + c % 3,
+                self.values[k],
+            )
+        })
+    }
 }
 
 impl BarrierPotential {
@@ -279,8 +303,8 @@ impl BarrierPotential {
             .sum()
     }
 
-    /// Energy, gradient and Hessian entries over the candidates at positions `x` (all
-    /// vertices); the Hessian only when `hessian` is `Some`. Stencils farther than `dhat` are
+    /// Energy, gradient and stencil Hessians over the candidates at positions `x` (all
+    /// vertices); the Hessians only when `hessian` is `Some`. Stencils farther than `dhat` are
     /// skipped. The energy is `+inf` (and the rest unspecified) if any stencil touches.
     pub fn assemble(
         &self,
@@ -290,7 +314,7 @@ impl BarrierPotential {
         hessian: Option<HessianMode>,
     ) -> Assembled {
         let dhat2 = self.dhat * self.dhat;
-        let active: Vec<(Candidate, f64, [f64; 12], Vec<f64>)> = candidates
+        let active: Vec<(f64, [f64; 12], StencilHessian)> = candidates
             .par_iter()
             .filter_map(|c| {
                 let (p, n) = c.positions(x);
@@ -298,42 +322,36 @@ impl BarrierPotential {
                     return None;
                 }
                 let mut g = [0.0; 12];
-                let mut h = vec![0.0; if hessian.is_some() { 9 * n * n } else { 0 }];
+                let mut h = StencilHessian {
+                    candidate: *c,
+                    values: [0.0; 144],
+                };
                 let value = self.stencil_energy(
                     mesh,
                     c,
                     &p[..n],
                     Some(&mut g[..3 * n]),
-                    hessian.is_some().then_some(&mut h[..]),
+                    hessian.is_some().then_some(&mut h.values[..9 * n * n]),
                     hessian.unwrap_or(HessianMode::Exact),
                 );
-                Some((*c, value, g, h))
+                Some((value, g, h))
             })
             .collect();
         let mut out = Assembled {
             energy: 0.0,
             gradient: vec![0.0; 3 * x.len()],
-            hessian: Vec::new(),
+            hessians: Vec::with_capacity(if hessian.is_some() { active.len() } else { 0 }),
         };
-        for (c, value, g, h) in &active {
+        for (value, g, h) in active {
             out.energy += value;
-            let (ids, n) = c.vertices();
+            let (ids, n) = h.candidate.vertices();
             for a in 0..n {
                 for i in 0..3 {
                     out.gradient[3 * ids[a] + i] += g[3 * a + i];
                 }
             }
             if hessian.is_some() {
-                let size = 3 * n;
-                for r in 0..size {
-                    for col in 0..size {
-                        out.hessian.push((
-                            3 * ids[r / 3] + r % 3,
-                            3 * ids[col / 3] + col % 3,
-                            h[r * size + col],
-                        ));
-                    }
-                }
+                out.hessians.push(h);
             }
         }
         out
