@@ -45,14 +45,7 @@ pub fn normal_force_magnitude(d: f64, dhat2: f64, stiffness: f64) -> f64 {
     -stiffness * barrier_gradient(d, dhat2) * 2.0 * d.sqrt()
 }
 
-/// Admissible range `[min, max]` of the barrier stiffness (J/m^4), after IPC:
-/// `min = scale m / (4 d0 b''(d0))` with `d0 = (1e-8 diagonal)^2` (or `dhat^2 / 2` if that is
-/// larger than `dhat^2`), and `max = 100 min`.
-///
-/// - `bbox_diagonal`: diagonal of the bounding box of the scene (m), > 0.
-/// - `dhat`: activation distance (m), > 0.
-/// - `average_mass`: a representative nodal mass (kg), e.g. the body's mass over its nodes.
-/// - `scale`: IPC's `1e11` (1/s^2).
+/// Admissible range `[min, max]` of the barrier stiffness (J/m^4).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StiffnessBounds {
     pub min: f64,
@@ -60,6 +53,14 @@ pub struct StiffnessBounds {
 }
 
 impl StiffnessBounds {
+    /// IPC's range: `min = scale m / (4 d0 b''(d0))` with `d0 = (1e-8 diagonal)^2` (or
+    /// `dhat^2 / 2` if that is larger than `dhat^2`), and `max = 100 min`.
+    ///
+    /// - `bbox_diagonal`: diagonal of the bounding box of the scene (m), > 0.
+    /// - `dhat`: activation distance (m), > 0.
+    /// - `average_mass`: a representative nodal mass `m` (kg), e.g. the body's mass over its
+    ///   nodes.
+    /// - `scale`: IPC's `1e11` (1/s^2).
     pub fn new(bbox_diagonal: f64, dhat: f64, average_mass: f64, scale: f64) -> Self {
         let dhat2 = dhat * dhat;
         let mut d0 = (1e-8 * bbox_diagonal).powi(2);

@@ -12,7 +12,9 @@ use crate::error::{check_finite, Error, Result};
 use crate::mesh::TetMesh;
 
 /// One stencil of the contact potential: a pair of primitives that may come within `dhat`.
-/// Vertex ids follow the numbering of [`CollisionMesh`].
+/// Vertex ids follow the numbering of [`CollisionMesh`]; `obstacle` indexes
+/// [`CollisionMesh::obstacles`] and must name a plane (`PointPlane`) or a sphere (`PointSphere`),
+/// as the broad phase makes them (the kernels panic otherwise).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Candidate {
     /// A vertex and a triangle (body vertex vs body or obstacle triangle, or obstacle vertex vs
