@@ -75,7 +75,8 @@ pub struct FrictionStencil {
 
 impl FrictionStencil {
     /// Lags a candidate at the start-of-step positions `x_t` (all vertices); `None` when it is
-    /// not active (distance >= dhat, or touching).
+    /// not active (distance >= dhat, or touching). As in IPC, `lambda = -kappa b'(d) 2 sqrt(d)`
+    /// leaves out the edge-edge mollifier, and the closest features are those at `x_t`.
     pub fn lag(
         mesh: &CollisionMesh,
         candidate: &Candidate,
