@@ -68,7 +68,17 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .errors import InputError, SolverError
+from ._version import __version__
+from .cables import placement_counts, write_cables
+from .convert import run_command as convert_command
+from .errors import ConvergenceError, InputError, SolverError
+from .inverse import DEFAULT_TOLERANCE, control, estimate
+from .io import read_mesh, write_result
+from .plot import plot_convergence, plot_rest_and_deformed, plot_trajectory
+from .progress import default as progress_default
+from .scene import Scene, schema_text
+from .solver import SolveReport
+from .viewer import serve as view_command
 
 __all__ = ["main"]
 
@@ -93,15 +103,9 @@ class _Parser(argparse.ArgumentParser):
         raise _UsageError(f"{message} (see '{self.prog} --help')")
 
 
-def _version() -> str:
-    from . import __version__
-
-    return __version__
-
-
 def _build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="sorofem", description="Simulate cable-driven silicone soft robots.")
-    parser.add_argument("--version", action="version", version=f"sorofem {_version()}")
+    parser.add_argument("--version", action="version", version=f"sorofem {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
 
@@ -149,8 +153,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code (see the module docstring)."""
     try:
         args = _build_parser().parse_args(argv)
-        from .progress import default as progress_default
-
         # --quiet silences the progress line too; otherwise it shows only on a terminal.
         with progress_default(False if getattr(args, "quiet", False) else None):
             return _dispatch(args)
@@ -180,13 +182,9 @@ def _dispatch(args: argparse.Namespace) -> int:
     if args.command in ("estimate", "control"):
         return _inverse(args)
     if args.command == "convert":
-        from .convert import _cli as _convert
-
-        return _convert(args.input, args.output, args.scale, quiet=args.quiet)
+        return convert_command(args.input, args.output, args.scale, quiet=args.quiet)
     if args.command == "view":
-        from .viewer import _cli as _view
-
-        return _view(args.scene, host=args.host, port=args.port, trajectory=args.trajectory)
+        return view_command(args.scene, host=args.host, port=args.port, trajectory=args.trajectory)
     if args.command == "schema":
         return _schema(args)
     return _info(args)
@@ -280,12 +278,6 @@ def _wrote(outputs: dict[str, Path], out: Path, extra: str = "") -> str:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from .errors import ConvergenceError
-    from .io import write_result
-    from .model import SolveReport
-    from .plot import plot_convergence, plot_rest_and_deformed
-    from .scene import Scene
-
     scene = Scene.load(args.scene)
     out, label = _output_folder(args, scene)
     outputs = {name: out / name for name in _selected_outputs(scene)}
@@ -301,7 +293,7 @@ def _run(args: argparse.Namespace) -> int:
         "formulation_options": scene.body.formulation_options,
         "material": scene.material.to_dict(),
         "gravity": scene.gravity.tolist(),
-        "solver_options": dict(scene.solver),
+        "solver_options": scene.solve_options.to_dict(),
     }
     if scene.dynamics is not None:
         return _run_dynamics(args, scene, outputs, base, out)
@@ -310,7 +302,7 @@ def _run(args: argparse.Namespace) -> int:
     except SolverError as exc:
         # Still leave a summary behind: it is what a user (or a script) inspects first.
         raw = getattr(exc, "report", None)
-        report = raw if isinstance(raw, SolveReport) else SolveReport.from_dict(raw or {})
+        report = raw if isinstance(raw, SolveReport) else SolveReport.from_dict(raw or {}, scene.formulation)
         summary = {
             **base,
             "converged": False,
@@ -323,7 +315,7 @@ def _run(args: argparse.Namespace) -> int:
         }
         text = _write_summary(outputs, summary)
         if report.residual_history and "convergence.png" in outputs:
-            plot_convergence(report, outputs["convergence.png"], tolerance=scene.solver["tolerance"])
+            plot_convergence(report, outputs["convergence.png"], tolerance=scene.solve_options.tolerance)
         if args.json:
             sys.stdout.write(text)
         what = "did not converge" if isinstance(exc, ConvergenceError) else "failed"
@@ -334,8 +326,6 @@ def _run(args: argparse.Namespace) -> int:
     if "result.vtu" in outputs:
         write_result(outputs["result.vtu"], result)
     if "cables.vtu" in outputs:
-        from .cables import write_cables
-
         write_cables(outputs["cables.vtu"], result)
     text = _write_summary(outputs, summary)
     if "shape.png" in outputs:
@@ -344,7 +334,7 @@ def _run(args: argparse.Namespace) -> int:
         plot_rest_and_deformed(result, outputs["shape.png"], color_by=color_by,
                                title=f"{scene.path.name}: max |u| = {result.max_displacement:.3g} m{field}")
     if "convergence.png" in outputs:
-        plot_convergence(result.report, outputs["convergence.png"], tolerance=scene.solver["tolerance"])
+        plot_convergence(result.report, outputs["convergence.png"], tolerance=scene.solve_options.tolerance)
 
     if args.json:
         sys.stdout.write(text)
@@ -368,9 +358,6 @@ def _run_dynamics(
     args: argparse.Namespace, scene: Any, outputs: dict[str, Path], base: dict[str, Any], out: Path
 ) -> int:
     """``run`` for a scene with ``[dynamics]``: trajectory.pvd + frames, summary.json, trajectory.png."""
-    from .cables import placement_counts
-    from .plot import plot_trajectory
-
     base = {**base, "dynamics": scene.to_dict()["dynamics"]}
     if scene.cables:
         base["cables"] = [
@@ -417,12 +404,6 @@ def _run_dynamics(
 
 def _inverse(args: argparse.Namespace) -> int:
     """``estimate`` / ``control``: summary.json and result.vtu in ``--out``."""
-    import sorofem as sf
-
-    from .inverse import DEFAULT_TOLERANCE
-    from .io import write_result
-    from .scene import Scene
-
     command = args.command
     scene = Scene.load(args.scene)
     section = getattr(scene, command)
@@ -434,9 +415,8 @@ def _inverse(args: argparse.Namespace) -> int:
     switches = {"summary.json": scene.output["summary"], "result.vtu": scene.output["vtu"]}
     outputs = {name: out / name for name, on in switches.items() if on}
     _refuse_inputs(outputs, scene, label)
-    solve = scene.solver
     # Sensitivities are only as accurate as the equilibria: never looser than the inverse default.
-    tolerance = min(solve["tolerance"], DEFAULT_TOLERANCE)
+    options = scene.solve_options.replace(tolerance=min(scene.solve_options.tolerance, DEFAULT_TOLERANCE))
     base = {
         "scene": str(scene.path),
         "command": command,
@@ -444,38 +424,41 @@ def _inverse(args: argparse.Namespace) -> int:
         "n_tets": scene.mesh.n_tets,
         "formulation": scene.formulation,
         "gravity": scene.gravity.tolist(),
-        "solver_options": dict(solve),
+        "solver_options": scene.solve_options.to_dict(),
         "options": dict(section),
     }
     if command == "estimate":
-        fit = sf.estimate(
+        fit = estimate(
             scene.body, scene.target, section["params"], section["x0"], bounds=section["bounds"],
             method=section["method"], starts=section["starts"], regions=scene.regions or None,
-            gravity=scene.gravity, tolerance=tolerance,
-            max_iterations=solve["max_iterations"], load_steps=solve["load_steps"],
+            gravity=scene.gravity, options=options,
         )
         m = fit.material
         summary = {
             **base,
             **fit.to_dict(),
             "converged": fit.converged,
-            "shear_modulus": m.shear_modulus, "lame_lambda": m.lame_lambda,
-            "youngs_modulus": m.youngs_modulus, "poisson_ratio": m.poisson_ratio,
+            # Every parameter of the model, in each of its forms (mu, lambda and E, nu).
+            **{name: m.value(name) for form in m.model.forms for name in form.names},
             "residual": fit.residual,
             "history": fit.history,
         }
         ok, result = fit.converged, fit.result
+        forms = "; ".join(
+            ", ".join(f"{m.model.parameter(n).symbol} {_fmt(m.value(n))}" + (f" {m.model.parameter(n).units}"
+                      if m.model.parameter(n).units else "") for n in form.names)
+            for form in m.model.forms
+        )
         lines = [
             f"{scene.path.name}: fitted {', '.join(section['params'])} ({section['method']})",
-            f"mu {_fmt(m.shear_modulus)} Pa, lambda {_fmt(m.lame_lambda)} Pa; "
-            f"E {_fmt(m.youngs_modulus)} Pa, nu {_fmt(m.poisson_ratio)}",
+            forms,
             f"residual {fit.residual:.3e} m (rms), {fit.forward_solves} forward solves, {fit.message}",
         ]
         failure = f"the fit did not converge: {fit.message}"
     else:
-        ctl = sf.control(
+        ctl = control(
             scene.body, scene.target, cables=section["cables"], bounds=section["bounds"], method=section["method"],
-            gravity=scene.gravity, solve_tolerance=tolerance, max_iterations=solve["max_iterations"], load_steps=solve["load_steps"],
+            gravity=scene.gravity, options=options,
         )
         summary = {**base, **ctl.to_dict(), "history": ctl.history, "converged": ctl.reachable}
         ok, result = ctl.reachable, ctl.result
@@ -513,9 +496,7 @@ def _fmt(value: Any) -> str:
 def _schema(args: argparse.Namespace) -> int:
     """``schema``: the scene files' JSON Schema on stdout, or in ``--out FILE`` (never overwritten
     without ``--force``)."""
-    from .scene import _schema_text
-
-    text = _schema_text()
+    text = schema_text()
     out: Path | None = args.out
     if out is None:
         if args.force:
@@ -557,8 +538,6 @@ def tet_quality(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
 
 
 def _info(args: argparse.Namespace) -> int:
-    from .io import read_mesh
-
     mesh = read_mesh(args.mesh, scale=args.scale)
     lo, hi = mesh.bounds()
     vol = mesh.volumes

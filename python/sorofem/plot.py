@@ -18,20 +18,56 @@ Examples
 from __future__ import annotations
 
 import os
-from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import NDArray
 
-if TYPE_CHECKING:
-    from .dynamics import Trajectory
-    from .model import SolveReport, StaticResult
+from .dynamics import Trajectory
+from .errors import InputError
+from .solver import SolveReport
+from .static import StaticResult
 
-__all__ = ["plot_rest_and_deformed", "plot_convergence", "plot_trajectory", "COLOR_FIELDS"]
+__all__ = ["plot_rest_and_deformed", "plot_convergence", "plot_trajectory", "COLOR_FIELDS", "FIELD_CENTRES",
+           "result_field"]
 
-#: Fields :func:`plot_rest_and_deformed` can colour the deformed surface by: nodal displacement
-#: magnitude and pressure (mixed formulation only) are averaged over each boundary triangle; the
-#: element fields von Mises stress and J are those of the tetrahedron the triangle belongs to.
+#: Fields a result can be coloured by (``shape.png``, the scene's ``[output] color_by``, the
+#: viewer's "colour by"): the nodal displacement magnitude and pressure (mixed formulation only),
+#: and the element fields von Mises stress and J.
 COLOR_FIELDS = ("displacement", "von_mises", "pressure", "J")
+#: Signed fields, drawn on a diverging map centred on their unloaded value; the others are
+#: magnitudes, drawn from 0.
+FIELD_CENTRES = {"pressure": 0.0, "J": 1.0}
+_LABELS = {
+    "displacement": "displacement magnitude |u| [m]",
+    "von_mises": "von Mises stress [Pa]",
+    "pressure": "pressure p [Pa]",
+    "J": "volume ratio J = det F",
+}
+
+
+def result_field(result: StaticResult, name: str, what: str = "color_by") -> tuple[NDArray[np.float64], bool, str]:
+    """The values of colour field ``name`` of a result, whether they are nodal (else one per
+    tetrahedron), and their label with units.
+
+    Raises
+    ------
+    InputError
+        ``name`` is not one of :data:`COLOR_FIELDS`, or is ``"pressure"`` for a result without
+        a pressure field (standard formulation); ``what`` names the option in the message.
+    """
+    if name not in COLOR_FIELDS:
+        raise InputError(f"{what}: expected one of {', '.join(map(repr, COLOR_FIELDS))}, got {name!r}")
+    if name == "displacement":
+        return np.linalg.norm(result.displacement, axis=1), True, _LABELS[name]
+    if name == "pressure":
+        if result.pressure is None:
+            raise InputError(
+                f"{what}='pressure': the result has no pressure field (only the mixed formulation has one); "
+                "colour by 'displacement', 'von_mises' or 'J'"
+            )
+        return np.asarray(result.pressure, dtype=np.float64), True, _LABELS[name]
+    values = result.von_mises if name == "von_mises" else result.J
+    return np.asarray(values, dtype=np.float64), False, _LABELS[name]
 
 
 def _new_figure(figsize: tuple[float, float]):  # -> Figure
@@ -72,30 +108,16 @@ def _face_owners(tets: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return tet_of[ids[len(every):]]
 
 
-def _surface_field(result: "StaticResult", faces: np.ndarray, color_by: str) -> tuple[np.ndarray, np.ndarray, str]:
-    """Per boundary triangle the value of ``color_by``, all values (for the colour bar), and its label."""
-    from .errors import InputError
-
-    if color_by not in COLOR_FIELDS:
-        raise InputError(f"color_by: expected one of {', '.join(map(repr, COLOR_FIELDS))}, got {color_by!r}")
-    if color_by == "displacement":
-        nodal = np.linalg.norm(result.displacement, axis=1)
-        return nodal[faces].mean(axis=1), nodal, "displacement magnitude |u| [m]"
-    if color_by == "pressure":
-        if result.pressure is None:
-            raise InputError(
-                "color_by='pressure': the result has no pressure field (only the mixed formulation has one); "
-                "colour by 'displacement', 'von_mises' or 'J'"
-            )
-        nodal = np.asarray(result.pressure)
-        return nodal[faces].mean(axis=1), nodal, "pressure p [Pa]"
-    values = np.asarray(result.von_mises if color_by == "von_mises" else result.J)
-    label = "von Mises stress [Pa]" if color_by == "von_mises" else "volume ratio J = det F"
-    return values[_face_owners(result.mesh.tets, faces)], values, label
+def _surface_field(result: StaticResult, faces: np.ndarray, color_by: str) -> tuple[np.ndarray, np.ndarray, str]:
+    """Per boundary triangle the value of ``color_by`` (nodal fields averaged over the triangle,
+    element fields of the tetrahedron it belongs to), all values (for the colour bar), and its label."""
+    values, nodal, label = result_field(result, color_by)
+    face_values = values[faces].mean(axis=1) if nodal else values[_face_owners(result.mesh.tets, faces)]
+    return face_values, values, label
 
 
 def plot_rest_and_deformed(
-    result: "StaticResult",
+    result: StaticResult,
     path: str | os.PathLike[str],
     title: str | None = None,
     color_by: str = "displacement",
@@ -141,8 +163,8 @@ def plot_rest_and_deformed(
     edges = _boundary_edges(faces)
     ax.add_collection3d(Line3DCollection(rest[edges], colors=(0.5, 0.5, 0.5, 0.35), linewidths=0.4))
 
-    if color_by in ("pressure", "J"):  # diverging, symmetric about the unloaded value
-        centre = 0.0 if color_by == "pressure" else 1.0
+    if color_by in FIELD_CENTRES:  # diverging, symmetric about the unloaded value
+        centre = FIELD_CENTRES[color_by]
         half = float(np.abs(values - centre).max(initial=0.0)) or (1.0 if color_by == "pressure" else 1e-6)
         norm = colors.Normalize(vmin=centre - half, vmax=centre + half)
         cmap = colormaps["coolwarm"]
@@ -191,7 +213,7 @@ def plot_rest_and_deformed(
 
 
 def plot_convergence(
-    report: "SolveReport",
+    report: SolveReport,
     path: str | os.PathLike[str],
     tolerance: float | None = None,
 ) -> None:
@@ -228,7 +250,7 @@ def plot_convergence(
     fig.savefig(os.fspath(path))
 
 
-def plot_trajectory(trajectory: "Trajectory", path: str | os.PathLike[str], title: str | None = None) -> None:
+def plot_trajectory(trajectory: Trajectory, path: str | os.PathLike[str], title: str | None = None) -> None:
     """Largest displacement and kinetic energy (log scale) against time, as a PNG.
 
     Parameters
