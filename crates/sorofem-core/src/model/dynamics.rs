@@ -1,9 +1,11 @@
 //! Dynamics: implicit Euler in time, each step a minimisation of the incremental potential
 //! through the same Newton solver as statics.
 
+use super::statics::infeasible_pulls;
 use super::system::{StepTerms, System};
 use super::{Loads, Model};
-use crate::energy::HessianMode;
+use crate::cables::CableSlot;
+use crate::energy::{HessianMode, TendonCommand};
 use crate::error::{Error, Result};
 use crate::newton::{self, NewtonOptions};
 
@@ -21,6 +23,9 @@ pub struct Trajectory {
     /// Node positions (m, 3 n) per saved frame.
     pub positions: Vec<Vec<f64>>,
     pub cable_points: Vec<Vec<Vec<[f64; 3]>>>,
+    /// Per saved frame, each tendon's tension (N) and pull (m) (`None` for spring cables).
+    pub tendon_tensions: Vec<Vec<Option<f64>>>,
+    pub tendon_pulls: Vec<Vec<Option<f64>>>,
     /// Kinetic energy (J) per saved frame.
     pub kinetic_energy: Vec<f64>,
     /// Node velocities (m/s, 3 n) at the end.
@@ -36,7 +41,9 @@ impl Model {
     /// `1/2 |u - u_n - h v_n|_M^2 / h^2 + 1/2 |u - u_n|_D^2 / h + Pi(u)` (lumped mass M,
     /// Rayleigh damping `D = alpha_M M + beta_K K_n`), then `v = (u - u_n) / h`. A step whose
     /// Newton solve fails is split in two, up to six times. `actuation[s][c]` is cable c's
-    /// alpha during step s. Starts from `initial_positions` (3 n, m; default rest; free cable nodes
+    /// command during step s: its alpha (spring cables), its pull (m) or its tension (N)
+    /// (tendons, whichever their command is). A displacement-controlled tendon is an exact
+    /// constraint of every step, as in statics. Starts from `initial_positions` (3 n, m; default rest; free cable nodes
     /// and pressures then continue from the last solve) at rest or with `initial_velocities`
     /// (3 n, m/s).
     #[allow(clippy::too_many_arguments)]
@@ -120,9 +127,10 @@ impl Model {
                 trajectory
                     .positions
                     .push((0..3 * n).map(|i| rest[i] + z[i]).collect());
-                trajectory
-                    .cable_points
-                    .push(model.terms.cables.points_at(z));
+                let (points, _, tensions, pulls) = model.cable_states(z);
+                trajectory.cable_points.push(points);
+                trajectory.tendon_tensions.push(tensions);
+                trajectory.tendon_pulls.push(pulls);
                 trajectory.kinetic_energy.push(
                     0.5 * mass
                         .iter()
@@ -134,8 +142,17 @@ impl Model {
         save(self, &z, &velocity, 0.0, &mut trajectory);
         let mut time = 0.0;
         for (s, alphas) in actuation.iter().enumerate() {
-            for (c, &alpha) in alphas.iter().enumerate() {
-                self.set_actuation(c, alpha)?;
+            for (c, &value) in alphas.iter().enumerate() {
+                match self.cable_slot(c)? {
+                    CableSlot::Springs(_) => self.set_actuation(c, value)?,
+                    CableSlot::Tendon(_) => {
+                        let command = match self.tendon_command(c)? {
+                            TendonCommand::Pull(_) => TendonCommand::Pull(value),
+                            TendonCommand::Tension(_) => TendonCommand::Tension(value),
+                        };
+                        self.set_tendon_command(c, command)?;
+                    }
+                }
             }
             // Halve the step on failure: a queue of sub-steps that must add up to dt.
             let mut pending = vec![(dt, 0usize)];
@@ -194,9 +211,14 @@ impl Model {
                     options,
                 );
                 problem.model.terms.cables.begin_step(h, &z);
+                problem.extend_state(&mut trial, true);
+                let start_tensions = trial[problem.constraints.offset..].to_vec();
                 let outcome =
                     rayon::scope(|_| newton::solve(&mut problem, &mut trial, &step_options));
                 problem.model.terms.cables.end_step();
+                let outcome = outcome
+                    .map_err(|error| infeasible_pulls(error, &problem.tendon_states(&trial)));
+                problem.finish_state(&mut trial, outcome.is_ok(), &start_tensions);
                 drop(problem);
                 match outcome {
                     Ok(report) => {

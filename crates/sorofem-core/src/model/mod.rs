@@ -9,6 +9,7 @@ pub mod dynamics;
 pub mod layout;
 pub mod statics;
 mod system;
+mod tendons;
 pub(crate) mod terms;
 
 pub use dynamics::{Damping, Trajectory};
@@ -16,9 +17,11 @@ pub use layout::DofLayout;
 pub use statics::{Loads, Solution};
 
 use crate::assembly::{Assembler, Evaluation};
-use crate::cables::{embed, CableSpec, PointPlacement};
+use crate::cables::{
+    check_pull, check_tendon_command, embed, CableSlot, CableSpec, PointPlacement,
+};
 use crate::energy::elastic::PressureCompliance;
-use crate::energy::{CableTerm, ElasticTerm, LumpedMass};
+use crate::energy::{CableTerm, ElasticTerm, LumpedMass, TendonCommand, TendonTerm};
 pub use crate::energy::{Formulation as ElementFormulation, PressureMass};
 use crate::error::{check_finite, Error, Result};
 use crate::linear::{FactorKind, SparseFactor};
@@ -55,6 +58,8 @@ pub struct Model {
     pub(crate) layout: DofLayout,
     pub(crate) terms: Terms,
     pub(crate) placements: Vec<Vec<PointPlacement>>,
+    /// Where each cable (in the order given) lives: spring chain or tendon.
+    pub(crate) slots: Vec<CableSlot>,
     /// The constructor's volumetric measure: the Neo-Hookean model's unless told otherwise.
     pub(crate) volumetric: Volumetric,
     pub(crate) assembler: Assembler,
@@ -65,6 +70,9 @@ pub struct Model {
     /// Weight (Pa/m) of the volume-constraint residual rows (m^3) in the mixed residual norm,
     /// so that they are measured in N like the force rows: `mean(mu) / mean edge length`.
     pub(crate) pressure_weight: f64,
+    /// Weight `sigma` (N/m) of a tendon's constraint `g` (m) in the residual and in its active
+    /// set test `T + sigma g > 0`: `mean(mu) * mean edge length`, the stiffness of one element.
+    pub(crate) constraint_weight: f64,
     /// Free-node displacements and pressures of the last solve: a warm start's starting guess.
     pub(crate) last_extra: Option<Vec<f64>>,
     pub(crate) material_set: bool,
@@ -117,6 +125,14 @@ impl Model {
         }
         let n_tets = mesh.n_tets();
         let embedded = embed(&mesh, cables)?;
+        let n_cables = embedded.slots.len();
+        let index_of = |springs: bool| -> Vec<usize> {
+            (embedded.slots.iter().enumerate())
+                .filter(|(_, slot)| matches!(slot, CableSlot::Springs(_)) == springs)
+                .map(|(c, _)| c)
+                .collect()
+        };
+        let (spring_index, tendon_index) = (index_of(true), index_of(false));
         let layout = DofLayout {
             n_nodes: n,
             n_free_nodes: embedded.free_nodes.len(),
@@ -137,7 +153,8 @@ impl Model {
                 volumetric,
                 element_formulation,
             ),
-            cables: CableTerm::new(embedded.cables),
+            cables: CableTerm::with_param_index(embedded.cables, spring_index, n_cables),
+            tendons: TendonTerm::new(embedded.tendons, tendon_index, n_cables),
             mass: LumpedMass {
                 mesh: mesh.clone(),
                 density: vec![0.0; n_tets],
@@ -180,11 +197,13 @@ impl Model {
             layout,
             terms,
             placements: embedded.placements,
+            slots: embedded.slots,
             volumetric,
             assembler,
             factor: factor?,
             hessian_scratch: Default::default(),
             pressure_weight: 1.0,
+            constraint_weight: 1.0,
             last_extra: None,
             material_set: false,
             last_state: None,
@@ -234,11 +253,11 @@ impl Model {
     /// Rest length of each segment of each cable (m), between the points the cable is attached
     /// to (a snapped point sits on the mesh, not where the user put it).
     pub fn cable_rest_lengths(&self) -> Vec<Vec<f64>> {
-        self.terms
-            .cables
-            .cables
-            .iter()
-            .map(|c| c.rest_lengths.clone())
+        (self.slots.iter())
+            .map(|slot| match *slot {
+                CableSlot::Springs(i) => self.terms.cables.cables[i].rest_lengths.clone(),
+                CableSlot::Tendon(i) => self.terms.tendons.tendons[i].rest_lengths.clone(),
+            })
             .collect()
     }
 
@@ -247,23 +266,35 @@ impl Model {
         &self.placements
     }
 
+    /// Number of cables, spring chains and tendons.
     pub fn n_cables(&self) -> usize {
-        self.terms.cables.cables.len()
+        self.slots.len()
     }
 
-    /// Cable `cable` for modification (callers invalidate the last solution when they change it).
-    fn cable_mut(&mut self, cable: usize) -> Result<&mut crate::energy::Cable> {
-        let len = self.n_cables();
-        self.terms
-            .cables
-            .cables
-            .get_mut(cable)
+    /// Where cable `cable` lives, or `Err` naming it when out of range.
+    pub fn cable_slot(&self, cable: usize) -> Result<CableSlot> {
+        self.slots
+            .get(cable)
+            .copied()
             .ok_or_else(|| Error::IndexOutOfRange {
                 param: "cable".into(),
                 position: 0,
                 index: cable as i64,
-                len,
+                len: self.slots.len(),
             })
+    }
+
+    /// Spring chain `cable` for modification (callers invalidate the last solution when they
+    /// change it); `Err` for a tendon, naming `what` it does not have.
+    fn cable_mut(&mut self, cable: usize, what: &str) -> Result<&mut crate::energy::Cable> {
+        match self.cable_slot(cable)? {
+            CableSlot::Springs(i) => Ok(&mut self.terms.cables.cables[i]),
+            CableSlot::Tendon(_) => Err(Error::invalid(
+                "cable",
+                format!("a spring cable (a tendon has no {what}: set its pull or tension)"),
+                format!("cable {cable}, a tendon"),
+            )),
+        }
     }
 
     /// Sets cable `cable`'s actuation alpha (> 0; 1 = rest length, < 1 = pulled).
@@ -275,7 +306,7 @@ impl Model {
                 actuation,
             ));
         }
-        let target = self.cable_mut(cable)?;
+        let target = self.cable_mut(cable, "actuation")?;
         if target.actuation != actuation {
             target.actuation = actuation;
             self.last_state = None;
@@ -292,12 +323,45 @@ impl Model {
                 stiffness,
             ));
         }
-        let target = self.cable_mut(cable)?;
+        let target = self.cable_mut(cable, "stiffness")?;
         if target.stiffness != stiffness {
             target.stiffness = stiffness;
             self.last_state = None;
         }
         Ok(())
+    }
+
+    /// Sets tendon `cable`'s command: a pull (m, shorter than its rest length) or a tension
+    /// (N, >= 0). A tendon's tension from the last solve stays the next solve's starting
+    /// multiplier (warm starts of a pull continuation).
+    pub fn set_tendon_command(&mut self, cable: usize, command: TendonCommand) -> Result<()> {
+        let CableSlot::Tendon(i) = self.cable_slot(cable)? else {
+            return Err(Error::invalid(
+                "cable",
+                "a tendon (a spring cable is driven by its actuation alpha)",
+                format!("cable {cable}, a spring cable"),
+            ));
+        };
+        check_tendon_command(cable, command)?;
+        let tendon = &mut self.terms.tendons.tendons[i];
+        check_pull(cable, command, tendon.rest_length())?;
+        if tendon.command != command {
+            tendon.command = command;
+            self.last_state = None;
+        }
+        Ok(())
+    }
+
+    /// Tendon `cable`'s command.
+    pub fn tendon_command(&self, cable: usize) -> Result<TendonCommand> {
+        match self.cable_slot(cable)? {
+            CableSlot::Tendon(i) => Ok(self.terms.tendons.tendons[i].command),
+            CableSlot::Springs(_) => Err(Error::invalid(
+                "cable",
+                "a tendon",
+                format!("cable {cable}, a spring cable"),
+            )),
+        }
     }
 
     /// Sets a Neo-Hookean material (with the constructor's volumetric measure): per-tet `mu > 0`,
@@ -384,13 +448,13 @@ impl Model {
             elastic.material() != model || elastic.params() != flat || mass.density != density;
         elastic.set_material(model, flat);
         mass.density = density.to_vec();
+        let mean_shear = shear / m as f64;
+        let mean_edge =
+            (self.mesh.volumes().iter().sum::<f64>() / m as f64 * 6.0 * 2f64.sqrt()).cbrt();
         if mixed {
-            let m = m as f64;
-            let mean_shear = shear / m;
-            let mean_edge =
-                (self.mesh.volumes().iter().sum::<f64>() / m * 6.0 * 2f64.sqrt()).cbrt();
             self.pressure_weight = mean_shear / mean_edge;
         }
+        self.constraint_weight = mean_shear * mean_edge;
         // New parameters make the last solution (and any factorisation at it) stale: sensitivities
         // then need a new solve rather than silently mixing old positions with new parameters.
         self.material_set = true;

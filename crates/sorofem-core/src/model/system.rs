@@ -1,10 +1,15 @@
 //! The Newton view of a model: its registry's terms plus the loads at a load factor (and, for a
 //! time step, the inertia and damping), with the merit, directions and auxiliary iterates that
 //! [`crate::newton`] asks of it. Statics and dynamics both solve through it.
+//!
+//! Displacement-controlled tendons add their multipliers to the state ([`TendonConstraints`]):
+//! a solve's state is the full DOF vector followed by one tension per such tendon, and its
+//! residual the free DOFs' followed by one complementarity row per tendon.
 
+use super::tendons::TendonConstraints;
 use super::{Formulation, Model};
 use crate::energy::pressure_iterates::{PressureIterates, PressureLinearisations};
-use crate::energy::HessianMode;
+use crate::energy::{HessianMode, TendonCommand};
 use crate::error::Result;
 use crate::linear::LowerPattern;
 use crate::newton::{AuxiliaryIterates, Merit, NewtonOptions, NewtonProblem};
@@ -32,6 +37,8 @@ pub(super) struct System<'a> {
     pressure_base: Vec<f64>,
     /// The model's Hessian scratch holds the exact Hessian at the state last evaluated.
     hessian_prepared: bool,
+    /// The displacement-controlled tendons, whose multipliers follow the full DOFs in the state.
+    pub(super) constraints: TendonConstraints,
 }
 
 /// The pressure iterates belong to one solve: the model's Hessians are exact again afterwards
@@ -116,6 +123,11 @@ impl<'a> System<'a> {
     ) -> Self {
         let pressure_iterates =
             options.pressure_iterates && model.formulation == Formulation::Standard;
+        let constraints = TendonConstraints::new(
+            &model.terms.tendons,
+            model.layout.n_full(),
+            model.constraint_weight,
+        );
         System {
             model,
             full_load,
@@ -128,7 +140,54 @@ impl<'a> System<'a> {
             linearised_at_iterate: false,
             pressure_base: Vec::new(),
             hessian_prepared: false,
+            constraints,
         }
+    }
+
+    /// Extends a full DOF vector by the multipliers: the last solve's (`warm`) or zero.
+    pub(super) fn extend_state(&self, z: &mut Vec<f64>, warm: bool) {
+        let tensions = if warm {
+            self.constraints.current(&self.model.terms.tendons)
+        } else {
+            vec![0.0; self.constraints.len()]
+        };
+        z.truncate(self.constraints.offset);
+        z.extend(tensions);
+    }
+
+    /// Ends a solve from the extended state `z`: after a success (`converged`) its multipliers
+    /// become the tendons' tensions; after a failure the tendons keep those they started with
+    /// (the next warm start's). Cuts `z` back to the full DOFs.
+    pub(super) fn finish_state(&mut self, z: &mut Vec<f64>, converged: bool, start: &[f64]) {
+        if converged {
+            self.constraints
+                .set_tensions(&mut self.model.terms.tendons, z);
+        } else {
+            let mut restored = z[..self.constraints.offset].to_vec();
+            restored.extend_from_slice(start);
+            self.constraints
+                .set_tensions(&mut self.model.terms.tendons, &restored);
+        }
+        z.truncate(self.constraints.offset);
+    }
+
+    /// For a failed solve: what each displacement-controlled tendon reached at the extended
+    /// state `z`, as `(cable, commanded pull, pull, tension)`.
+    pub(super) fn tendon_states(&self, z: &[f64]) -> Vec<(usize, f64, f64, f64)> {
+        let term = &self.model.terms.tendons;
+        (self
+            .constraints
+            .tendons
+            .iter()
+            .zip(self.constraints.multipliers(z)))
+        .map(|(&t, &tension)| {
+            let tendon = &term.tendons[t];
+            let TendonCommand::Pull(d) = tendon.command else {
+                unreachable!("constraints are displacement-controlled tendons")
+            };
+            (term.cable_index(t), d, tendon.pull(z), tension)
+        })
+        .collect()
     }
 }
 
@@ -139,6 +198,13 @@ impl System<'_> {
 
     fn is_mixed(&self) -> bool {
         matches!(self.model.formulation, Formulation::Mixed { .. })
+    }
+
+    /// The full DOFs of the extended state `z`, after giving the tendons its multipliers.
+    fn full_dofs<'z>(&mut self, z: &'z [f64]) -> &'z [f64] {
+        self.constraints
+            .set_tensions(&mut self.model.terms.tendons, z);
+        &z[..self.constraints.offset]
     }
 
     /// Takes the pressure linearisation the last Hessian pass recorded as that of the current
@@ -179,6 +245,9 @@ impl System<'_> {
             g[len - n..]
                 .iter_mut()
                 .for_each(|v| *v *= self.model.pressure_weight);
+        }
+        if self.merit() != Merit::Energy {
+            g.extend(self.constraints.residual_rows(&self.model.terms.tendons, z));
             if g.iter().any(|v| !v.is_finite()) {
                 return (f64::INFINITY, g);
             }
@@ -203,8 +272,11 @@ impl NewtonProblem for System<'_> {
     /// (the residual 10-fold) over the recent maximum, so that full Newton steps of the
     /// saddle-point system are accepted far from the solution, where the Armijo test on the
     /// residual would creep in 1/16 steps.
+    ///
+    /// Displacement-controlled tendons make the problem a saddle point too (the multipliers have
+    /// no energy to descend): the residual merit, with their complementarity rows.
     fn merit(&self) -> Merit {
-        if self.is_mixed() {
+        if self.is_mixed() || !self.constraints.is_empty() {
             Merit::Residual {
                 nonmonotone_factor: 100.0,
             }
@@ -228,6 +300,13 @@ impl NewtonProblem for System<'_> {
                 z[3 * node + k] = factor * u[k];
             }
         }
+        // The motors' commands are loads: pulls and tensions grow with the factor.
+        self.constraints.factor = factor;
+        for tendon in &mut self.model.terms.tendons.tendons {
+            if let TendonCommand::Tension(tension) = tendon.command {
+                tendon.tension = factor * tension;
+            }
+        }
     }
 
     fn load_norm(&self) -> f64 {
@@ -239,18 +318,20 @@ impl NewtonProblem for System<'_> {
     /// so that they are forces too.
     fn merit_and_gradient(&mut self, z: &mut [f64]) -> (f64, Vec<f64>) {
         self.hessian_prepared = false;
+        let full = self.full_dofs(z);
         let eval = self
             .model
             .assembler
-            .evaluate(&self.model.terms.internal(), z, true, None);
+            .evaluate(&self.model.terms.internal(), full, true, None);
         self.merit_at(z, eval.energy, eval.gradient)
     }
 
     fn merit_gradient_and_hessian(&mut self, z: &mut [f64]) -> (f64, Vec<f64>) {
+        let full = self.full_dofs(z);
         let mut eval = std::mem::take(&mut self.model.hessian_scratch);
         self.model.assembler.evaluate_into(
             &self.model.terms.internal(),
-            z,
+            full,
             true,
             Some(HessianMode::Exact),
             &mut eval,
@@ -274,11 +355,12 @@ impl NewtonProblem for System<'_> {
             HessianMode::Exact
         };
         let t0 = Instant::now();
+        let full = self.full_dofs(z);
         let mut eval = std::mem::take(&mut self.model.hessian_scratch);
         if !(self.hessian_prepared && mode == HessianMode::Exact) {
             self.model.assembler.evaluate_into(
                 &self.model.terms.internal(),
-                z,
+                full,
                 false,
                 Some(mode),
                 &mut eval,
@@ -304,20 +386,48 @@ impl NewtonProblem for System<'_> {
             return Ok(None);
         }
         let t0 = Instant::now();
-        let mut d: Vec<f64> = g.iter().map(|v| -v).collect();
+        let n_free = self.model.assembler.n_free();
+        let mut d: Vec<f64> = g[..n_free].iter().map(|v| -v).collect();
         if self.is_mixed() {
             let n = self.n_nodes();
-            let len = d.len();
-            d[len - n..]
+            d[n_free - n..]
                 .iter_mut()
                 .for_each(|v| *v /= self.model.pressure_weight);
         }
+        // The constrained tendons' forces come out of the residual: the bordered step puts
+        // them back at their new multipliers.
+        let term = &self.model.terms.tendons;
+        for (i, &tension) in self.constraints.multipliers(z).iter().enumerate() {
+            if tension != 0.0 {
+                let row = (self.constraints).jacobian_row(term, i, full, &self.model.assembler);
+                for (di, ri) in d.iter_mut().zip(row) {
+                    *di += tension * ri;
+                }
+            }
+        }
         self.model.factor.solve_in_place(&mut d);
+        if !self.constraints.is_empty() {
+            let model = &*self.model;
+            let step = (self.constraints).bordered_step(
+                &model.terms.tendons,
+                z,
+                &model.assembler,
+                &model.factor,
+                d,
+            );
+            let Some((dx, tensions)) = step else {
+                timings.solve += t0.elapsed().as_secs_f64();
+                return Ok(None);
+            };
+            d = dx;
+            let current = self.constraints.multipliers(z);
+            d.extend(tensions.iter().zip(current).map(|(new, old)| new - old));
+        }
         timings.solve += t0.elapsed().as_secs_f64();
-        // No inertia test for the mixed formulation: the condensed curvature
-        // du^T A du + dp^T C dp cancels catastrophically when the pressure (and so K_geo(p)) is
-        // large.
-        let usable = if self.is_mixed() {
+        // No inertia test for residual merits: for the mixed formulation the condensed
+        // curvature du^T A du + dp^T C dp cancels catastrophically when the pressure (and so
+        // K_geo(p)) is large, and a constrained step need not descend the energy.
+        let usable = if self.merit() != Merit::Energy {
             d.iter().all(|v| v.is_finite())
         } else {
             d.iter().zip(g).map(|(a, b)| a * b).sum::<f64>() < 0.0
@@ -330,9 +440,18 @@ impl NewtonProblem for System<'_> {
     }
 
     fn step(&self, z: &mut [f64], d: &[f64], t: f64) {
-        for (&full, di) in self.model.assembler.full_of_free().iter().zip(d) {
+        let free = self.model.assembler.full_of_free();
+        for (&full, di) in free.iter().zip(d) {
             z[full] += t * di;
         }
+        let offset = self.constraints.offset;
+        for (i, di) in d[free.len()..].iter().enumerate() {
+            z[offset + i] += t * di;
+        }
+    }
+
+    fn constraints_met(&self, z: &[f64]) -> bool {
+        self.constraints.met(&self.model.terms.tendons, z)
     }
 
     /// No mesh node may move farther than the rest mesh's bounding-box diagonal in one step.

@@ -6,13 +6,15 @@
 use super::statics::Loads;
 use crate::energy::{
     CableTerm, ElasticTerm, GravityTerm, LumpedMass, NodalForceTerm, ParamTerm, PointGravityTerm,
-    Term,
+    TendonTerm, Term,
 };
 
 /// Every energy term of a model, and the lumped mass that gravity and inertia act on.
 pub(crate) struct Terms {
     pub elastic: ElasticTerm,
     pub cables: CableTerm,
+    /// Tendons at their current tensions (commands, or the solver's multipliers).
+    pub tendons: TendonTerm,
     pub mass: LumpedMass,
 }
 
@@ -27,8 +29,8 @@ pub(crate) struct LoadTerms<'a> {
 impl Terms {
     /// The terms whose sum is the internal energy, in the assembler's order (the assembler is
     /// built from this list and every evaluation passes it again).
-    pub fn internal(&self) -> [&dyn Term; 2] {
-        [&self.elastic, &self.cables]
+    pub fn internal(&self) -> [&dyn Term; 3] {
+        [&self.elastic, &self.cables, &self.tendons]
     }
 
     /// The loads of `loads` as terms (gravity on the tets and the free cable nodes, nodal forces).
@@ -50,12 +52,13 @@ impl Terms {
     }
 
     /// Every term with parameters, internal and external: what sensitivities differentiate.
-    pub fn parameterised<'a>(&'a self, loads: &'a LoadTerms<'a>) -> [&'a dyn ParamTerm; 4] {
+    pub fn parameterised<'a>(&'a self, loads: &'a LoadTerms<'a>) -> [&'a dyn ParamTerm; 5] {
         [
             &self.elastic,
             &loads.gravity,
             &loads.point_gravity,
             &self.cables,
+            &self.tendons,
         ]
     }
 }
