@@ -8,6 +8,7 @@ use errors::{report_to_dict, IntoPyResult};
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
+use sorofem_core::energy::TendonCommand;
 use sorofem_core::material::Volumetric;
 use sorofem_core::{
     Formulation, Loads, Material, Orientation, PressureMass, SolveOptions, TetMesh,
@@ -349,6 +350,8 @@ impl Model {
             .map(|t| PyArray1::from_slice(py, t))
             .collect();
         out.set_item("cable_tensions", tensions)?;
+        out.set_item("tendon_tensions", &solution.tendon_tensions)?;
+        out.set_item("tendon_pulls", &solution.tendon_pulls)?;
         match solution.pressure {
             Some(p) => out.set_item("pressure", PyArray1::from_vec(py, p))?,
             None => out.set_item("pressure", py.None())?,
@@ -437,6 +440,8 @@ impl Model {
             })
             .collect();
         out.set_item("cable_points", cable_points)?;
+        out.set_item("tendon_tensions", &trajectory.tendon_tensions)?;
+        out.set_item("tendon_pulls", &trajectory.tendon_pulls)?;
         out.set_item(
             "kinetic_energy",
             PyArray1::from_slice(py, &trajectory.kinetic_energy),
@@ -472,7 +477,8 @@ impl Model {
     }
 
     /// Forward sensitivity along a parameter direction (dict with any of the adjoint's keys):
-    /// returns {"dx": (n, 3), "dp": (n,) or None}.
+    /// returns {"dx": (n, 3), "dp": (n,) or None, "dtension": per cable, the tendon's tension
+    /// change (N) or None for a spring cable}.
     fn forward<'py>(
         &mut self,
         py: Python<'py>,
@@ -480,9 +486,10 @@ impl Model {
     ) -> PyResult<Bound<'py, PyDict>> {
         let delta = convert::param_direction(direction, &self.inner.param_zeros()).py(py)?;
         let inner = &mut self.inner;
-        let (dx, dp) = py.detach(|| inner.forward(&delta)).py(py)?;
+        let (dx, dp, dtension) = py.detach(|| inner.forward_with_tensions(&delta)).py(py)?;
         let out = PyDict::new(py);
         out.set_item("dx", convert::points_to_numpy(py, &dx))?;
+        out.set_item("dtension", dtension)?;
         match dp {
             Some(p) => out.set_item("dp", PyArray1::from_vec(py, p))?,
             None => out.set_item("dp", py.None())?,
@@ -526,6 +533,41 @@ impl Model {
         stiffness: f64,
     ) -> PyResult<()> {
         self.inner.set_cable_stiffness(cable, stiffness).py(py)
+    }
+
+    /// Sets tendon `cable`'s command: `kind` "pull" (m) or "tension" (N).
+    fn set_tendon_command(
+        &mut self,
+        py: Python<'_>,
+        cable: usize,
+        kind: &str,
+        value: f64,
+    ) -> PyResult<()> {
+        let command = match kind {
+            "pull" => TendonCommand::Pull(value),
+            "tension" => TendonCommand::Tension(value),
+            other => {
+                return Err(errors::to_py(
+                    py,
+                    sorofem_core::Error::invalid(
+                        "kind",
+                        "\"pull\" or \"tension\"",
+                        format!("{other:?}"),
+                    ),
+                ))
+            }
+        };
+        self.inner.set_tendon_command(cable, command).py(py)
+    }
+
+    /// Strain energy (J) of the body at positions (n, 3): the elastic term alone.
+    fn strain_energy(&self, py: Python<'_>, positions: &Bound<'_, PyAny>) -> PyResult<f64> {
+        let positions: Vec<f64> = convert::points("positions", positions)
+            .py(py)?
+            .into_iter()
+            .flatten()
+            .collect();
+        self.inner.strain_energy(&positions).py(py)
     }
 
     /// Rest length (m) of each segment, per cable, between the attached points.
