@@ -40,7 +40,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ._deprecated import moved
 from ._validate import as_finite, describe, non_negative, positive_int, positive_scalar
-from .body import Body
+from .body import Body, set_cable_values
 from .cables import attached_rest_lengths, cable_index, segment_tensions
 from .errors import ConvergenceError, InputError, ParameterError, ShapeError
 from .progress import Progress
@@ -124,7 +124,9 @@ def evaluate_schedule(
     * a dict ``{cable or index: entry}``; cables not named hold their actuation;
     * an array ``(steps, n_cables)``.
 
-    Step ``s`` is evaluated at ``t = (s + 1) dt``. Every alpha must be finite and > 0.
+    Step ``s`` is evaluated at ``t = (s + 1) dt``. Every alpha must be finite and > 0. A
+    tendon's entries are its command (:attr:`sorofem.Body.commands`): its pull (m, shorter than
+    its rest length) or its tension (N, >= 0).
 
     Examples
     --------
@@ -174,13 +176,22 @@ def evaluate_schedule(
             out[:, c] = _alpha_column(entry, times, current[c], f"actuation[{c}]")
     else:
         raise InputError(f"actuation: expected None, a callable, a sequence or a dict, got {describe(schedule)}")
-    bad = ~(np.isfinite(out) & (out > 0))
-    if np.any(bad):
-        s, c = (int(i) for i in np.argwhere(bad)[0])
-        raise ParameterError(
-            f"actuation: alphas must be finite and > 0, got {out[s, c]} for cable {c} at step {s} (t = {times[s]:g} s)",
-            "actuation",
-        )
+    for c, (kind, _) in enumerate(body.commands):
+        column = out[:, c]
+        if kind == "actuation":
+            bad, expected = ~(np.isfinite(column) & (column > 0)), "alphas must be finite and > 0"
+        elif kind == "pull":
+            length = body.cables[c].length
+            bad = ~(np.isfinite(column) & (column < length))
+            expected = f"pulls must be finite and shorter than the tendon's rest length {length:.6g} m"
+        else:
+            bad, expected = ~(np.isfinite(column) & (column >= 0)), "tensions must be finite and >= 0 N"
+        if np.any(bad):
+            s = int(np.argwhere(bad)[0, 0])
+            raise ParameterError(
+                f"actuation: {expected}, got {out[s, c]} for cable {c} at step {s} (t = {times[s]:g} s)",
+                "actuation",
+            )
     return np.ascontiguousarray(out)
 
 
@@ -207,8 +218,11 @@ class Trajectory:
         How many time steps were split because Newton failed.
     cable_points
         Per frame, one ``(k, 3)`` array per cable, m.
+    cable_tension, cable_pull
+        Per frame, per cable: a tendon's tension (N) and pulled length ``L0 - L`` (m);
+        ``None`` for a spring chain.
     actuation
-        The alphas used, ``(steps, n_cables)``.
+        The commands used, ``(steps, n_cables)``: alphas (pulls or tensions for tendons).
     timings
         ``{"simulate": s}``: wall-clock time of the integration.
     """
@@ -224,6 +238,8 @@ class Trajectory:
         self.iterations = np.asarray(out["iterations"], dtype=np.int64)
         self.cutbacks = int(out.get("cutbacks", 0))
         self.cable_points = [[np.asarray(p, dtype=np.float64) for p in frame] for frame in out.get("cable_points", [])]
+        self.cable_tension: list[list[float | None]] = [list(frame) for frame in out.get("tendon_tensions", [])]
+        self.cable_pull: list[list[float | None]] = [list(frame) for frame in out.get("tendon_pulls", [])]
         self.actuation = actuation
         #: The cables' alphas before the first step, ``(n_cables,)``.
         self.initial_actuation = np.asarray(body.actuations, dtype=np.float64)
@@ -245,12 +261,15 @@ class Trajectory:
 
     def cable_tensions(self, frame: int = -1) -> list[NDArray[np.float64]]:
         """Tension of every segment at a saved frame, one ``(k - 1,)`` array per cable (N),
-        from the frame's cable points and the alphas of the step that produced it."""
+        from the frame's cable points and the alphas of the step that produced it (a
+        tendon's segments all carry its tension, :attr:`cable_tension`)."""
         frame = range(self.n_frames)[frame]
         step = int(round(self.times[frame] / self.dt)) - 1
         alphas = self.actuation[step] if step >= 0 else self.initial_actuation
         return [
-            segment_tensions(cable, self.cable_points[frame][c], float(alphas[c]), attached_rest_lengths(self.body, c))
+            np.full(cable.n_segments, float(self.cable_tension[frame][c] or 0.0)) if cable.is_tendon
+            else segment_tensions(cable, self.cable_points[frame][c], float(alphas[c]),
+                                  attached_rest_lengths(self.body, c))
             for c, cable in enumerate(self.body.cables)
         ]
 
@@ -455,9 +474,8 @@ def simulate(
         raise
     finally:
         bar.close()
-        # The extension leaves the last step's alphas in the model; the body's own stay in charge.
-        for c, alpha in enumerate(body.actuations):
-            model.set_actuation(c, alpha)
+        # The extension leaves the last step's commands in the model; the body's own stay in charge.
+        set_cable_values(model, body.commands, body.cable_stiffnesses)
     return Trajectory(body, dt, out, alphas, time.perf_counter() - start)
 
 
@@ -499,7 +517,8 @@ def _run_in_chunks(
     only its end, kept if that is a save point. The first chunk is one step; later ones aim at
     :data:`CHUNK_SECONDS` each."""
     joined: dict[str, Any] = {"times": [], "positions": [], "kinetic_energy": [], "cable_points": [],
-                              "iterations": [], "cutbacks": 0, "velocities": None}
+                              "tendon_tensions": [], "tendon_pulls": [], "iterations": [], "cutbacks": 0,
+                              "velocities": None}
     done, t_offset, size = 0, 0.0, 1
     x, v = x0, v0
     while done < steps:
@@ -527,7 +546,8 @@ def _run_in_chunks(
         joined["times"].append(t_offset + times[keep])
         joined["positions"].append(positions[keep])
         joined["kinetic_energy"].append(np.asarray(out["kinetic_energy"], dtype=np.float64)[keep])
-        joined["cable_points"].extend(list(out.get("cable_points", []))[keep])
+        for key in ("cable_points", "tendon_tensions", "tendon_pulls"):
+            joined[key].extend(list(out.get(key, []))[keep])
         joined["iterations"].append(np.asarray(out["iterations"], dtype=np.int64))
         joined["cutbacks"] += int(out.get("cutbacks", 0))
         joined["velocities"] = out["velocities"]
@@ -543,6 +563,8 @@ def _run_in_chunks(
         "velocities": joined["velocities"],
         "kinetic_energy": np.concatenate(joined["kinetic_energy"]),
         "cable_points": joined["cable_points"],
+        "tendon_tensions": joined["tendon_tensions"],
+        "tendon_pulls": joined["tendon_pulls"],
         "iterations": np.concatenate(joined["iterations"]),
         "cutbacks": joined["cutbacks"],
     }
