@@ -50,7 +50,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Mapping, Protocol
+from typing import Any, Mapping, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -59,7 +59,8 @@ from ._formats import CELL_TAG_KEYS, Surface, meshio_read, read_surface, refuse_
 from .errors import InputError
 from .mesh import Mesh
 
-__all__ = ["read_mesh", "write_mesh", "write_result", "read_surface", "Surface", "CELL_TAG_KEYS", "meshio_read"]
+__all__ = ["read_mesh", "write_mesh", "write_result", "result_mesh", "read_surface", "Surface", "CELL_TAG_KEYS",
+           "meshio_read"]
 
 PathLike = str | os.PathLike[str]
 
@@ -126,28 +127,33 @@ def write_mesh(path: PathLike, mesh: Mesh) -> None:
     mesh.write(path)
 
 
-def write_result(
-    path: PathLike,
+def result_mesh(
     result: ResultLike,
     extra_point_data: Mapping[str, ArrayLike] | None = None,
-) -> None:
-    """Write a result (normally ``.vtu``) for ParaView.
+    *,
+    points: str = "rest",
+) -> Any:
+    """A result as a :class:`meshio.Mesh`: linear tetrahedra with point data ``displacement``
+    (m), ``pressure`` (Pa, mixed formulation only) and ``extra_point_data``, cell data ``J``
+    (volume ratio) and ``von_mises`` (Pa).
 
-    The points are the **deformed** positions. Point data: ``displacement`` (m),
-    ``pressure`` (Pa, mixed formulations only) and ``extra_point_data``; cell data:
-    ``J`` (volume ratio) and ``von_mises`` (Pa). Use ParaView's "Warp By Vector" with
-    scale -1 on ``displacement`` to see the rest shape.
+    Parameters
+    ----------
+    points
+        ``"rest"`` (default, the finite-element convention): the rest positions, so that
+        ParaView's "Warp By Vector" on ``displacement`` (scale 1) shows the deformed body;
+        ``"deformed"``: the deformed positions (then warping would deform it twice).
 
     Raises
     ------
     InputError
-        ``path`` is the input mesh file, or ``extra_point_data`` has a wrong length.
+        ``points`` is neither, or ``extra_point_data`` has a wrong length.
     """
     import meshio
 
-    path = Path(path)
+    if points not in ("rest", "deformed"):
+        raise InputError(f"points: expected 'rest' or 'deformed', got {points!r}")
     mesh = result.mesh
-    refuse_overwrite(path, mesh.source)
     point_data: dict[str, np.ndarray] = {"displacement": result.displacement}
     if result.pressure is not None:
         point_data["pressure"] = result.pressure
@@ -159,7 +165,32 @@ def write_result(
             )
         point_data[str(name)] = arr
     cell_data = {"J": [result.J], "von_mises": [result.von_mises]}
-    meshio.write(
-        path,
-        meshio.Mesh(result.positions, [("tetra", mesh.tets)], point_data=point_data, cell_data=cell_data),
-    )
+    xyz = mesh.points if points == "rest" else result.positions
+    return meshio.Mesh(np.array(xyz), [("tetra", mesh.tets)], point_data=point_data, cell_data=cell_data)
+
+
+def write_result(
+    path: PathLike,
+    result: ResultLike,
+    extra_point_data: Mapping[str, ArrayLike] | None = None,
+    *,
+    points: str = "rest",
+) -> None:
+    """Write a result (normally ``.vtu``) for ParaView: :func:`result_mesh` written by meshio.
+
+    The points are the **rest** positions and the point data ``displacement`` carries the
+    motion (the finite-element convention): in ParaView, "Warp By Vector" on ``displacement``
+    with scale 1 shows the deformed body, once. ``points="deformed"`` writes the deformed
+    positions instead (e.g. a second file ``deformed.vtu`` to open without a filter).
+
+    Raises
+    ------
+    InputError
+        ``path`` is the input mesh file, ``points`` is unknown, or ``extra_point_data`` has a
+        wrong length.
+    """
+    import meshio
+
+    path = Path(path)
+    refuse_overwrite(path, result.mesh.source)
+    meshio.write(path, result_mesh(result, extra_point_data, points=points))

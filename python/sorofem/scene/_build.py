@@ -56,7 +56,7 @@ def _box_bounds(check: Checker, box: dict[str, Any], key: str) -> tuple[np.ndarr
 
 
 def _span(mesh: Mesh) -> str:
-    lo, hi = mesh.bounds()
+    lo, hi = mesh.bounds
     return f"the mesh spans {np.round(lo, 6).tolist()} .. {np.round(hi, 6).tolist()}"
 
 
