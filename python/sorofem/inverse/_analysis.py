@@ -18,15 +18,15 @@ from ._parameters import Parameters
 from ._problem import Problem, fitted_material
 from .results import Profile, Uncertainty
 
-__all__ = ["material_std", "profile_index", "profile", "PROFILE_CONDITION", "PROFILE_SPAN", "PROFILE_POINTS"]
+__all__ = ["material_std", "profile_index", "profile_span", "profile", "PROFILE_CONDITION", "PROFILE_SPAN", "PROFILE_POINTS"]
 
 #: ``profile=None`` profiles when the scaled Jacobian's condition number exceeds this: the
 #: worst determined combination then moves the residual 1000 times less than the best one, and
 #: a linear standard error along it says little.
 PROFILE_CONDITION = 1e3
-#: How far an automatic profile reaches on each side of the optimum, in the optimiser's scaling
-#: (log theta; the logit of the Poisson ratio): a factor 1000 either way (both sides' span from
-#: a bound).
+#: The farthest an automatic profile reaches on each side of the optimum, in the optimiser's
+#: scaling (log theta; the logit of the Poisson ratio): a factor 1000 either way (both sides'
+#: span from a bound).
 PROFILE_SPAN = math.log(1e3)
 #: Points of an automatic profile (the optimum is added to them).
 PROFILE_POINTS = 9
@@ -70,12 +70,21 @@ def profile_index(unc: Uncertainty) -> int:
     return int(np.argmax(np.abs(unc.weak_direction)))
 
 
-def _grid(s_opt: float, lo: float, hi: float, points: int) -> NDArray[np.float64]:
-    a, b = s_opt - PROFILE_SPAN, s_opt + PROFILE_SPAN
+def profile_span(unc: Uncertainty, index: int, dts: NDArray[np.float64]) -> float:
+    """How far an automatic profile reaches either side of the optimum, in the optimiser's
+    scaling: four linear standard errors (twice the 95 % interval), at most
+    :data:`PROFILE_SPAN`; all of that where the standard error is unknown (a parameter at a
+    bound) or not finite."""
+    std_s = float(unc.std[index]) / abs(float(dts[index])) if dts[index] else math.inf
+    return min(PROFILE_SPAN, 4.0 * std_s) if math.isfinite(std_s) and std_s > 0 else PROFILE_SPAN
+
+
+def _grid(s_opt: float, lo: float, hi: float, points: int, span: float) -> NDArray[np.float64]:
+    a, b = s_opt - span, s_opt + span
     if s_opt - lo <= 1e-9 * (1 + abs(s_opt)):  # at the lower bound: all on one side
-        a, b = lo, lo + 2 * PROFILE_SPAN
+        a, b = lo, lo + 2 * span
     elif hi - s_opt <= 1e-9 * (1 + abs(s_opt)):
-        a, b = hi - 2 * PROFILE_SPAN, hi
+        a, b = hi - 2 * span, hi
     a, b = max(a, lo), min(b, hi)
     return np.unique(np.r_[np.linspace(a, b, max(points, 2)), s_opt])
 
@@ -89,6 +98,7 @@ def profile(
     hi: NDArray[np.float64],
     values: ArrayLike | None = None,
     points: int = PROFILE_POINTS,
+    span: float = PROFILE_SPAN,
     confidence: float = 0.95,
     max_evaluations: int = 30,
     xtol: float = 1e-8,
@@ -99,14 +109,14 @@ def profile(
     optimum ``s_opt`` so that each fit starts from its neighbour's.
 
     ``values`` (in the parameter's units) replace the automatic grid: ``points`` values over
-    :data:`PROFILE_SPAN` either side of the optimum in the optimiser's scaling, within the
-    bounds (all on one side for a parameter at a bound)."""
+    ``span`` either side of the optimum in the optimiser's scaling (:func:`profile_span`),
+    within the bounds (all on one side for a parameter at a bound)."""
     p = problem.params
     block = next(b for b in p.blocks if b.offset <= index < b.offset + b.size)
     if block.size != 1:
         raise InputError(f"profile: {block.name!r} has {block.size} values; only a scalar parameter can be profiled")
     if values is None:
-        grid = _grid(float(s_opt[index]), float(lo[index]), float(hi[index]), points)
+        grid = _grid(float(s_opt[index]), float(lo[index]), float(hi[index]), points, span)
     else:
         theta = np.asarray(values, dtype=np.float64).reshape(-1)
         if theta.size < 2 or not np.all(block.transform.contains(theta)) or not np.all(np.isfinite(theta)):

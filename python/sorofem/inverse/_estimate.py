@@ -15,7 +15,7 @@ from numpy.typing import ArrayLike
 from ..errors import InputError
 from ..progress import Progress
 from ..solver import SolveOptions
-from ._analysis import PROFILE_CONDITION, material_std, profile_index
+from ._analysis import PROFILE_CONDITION, PROFILE_SPAN, material_std, profile_index, profile_span
 from ._analysis import profile as profile_along
 from ._optimizers import Recorder, bound_sides, levenberg_marquardt, scipy_minimize, uncertainty
 from ._parameters import Parameters
@@ -140,8 +140,9 @@ def estimate(
         fitted; ``True``: that parameter, whatever the conditioning; a parameter name: that
         one; ``False``: no profile. Each point costs a fit of the other parameters.
     profile_values
-        The values of the profiled parameter, in its units (default: 9 points over a factor
-        1000 either side of the optimum in the optimiser's scaling, within the bounds).
+        The values of the profiled parameter, in its units (default: 9 points over four
+        standard errors either side of the optimum, at most a factor 1000 either way in the
+        optimiser's scaling, within the bounds; from the bound for a parameter on one).
 
     Returns
     -------
@@ -241,7 +242,8 @@ def estimate(
         index = _profile_choice(profile, p, unc, fields)
         if index is not None:
             bar.desc = f"estimate: profile of {p.names[index] if p.size == len(p.names) else index}"
-            fit_profile = profile_along(problem, s, r, index, lo, hi, values=profile_values)
+            span = profile_span(unc, index, p.dtheta_ds(s)) if unc is not None else PROFILE_SPAN
+            fit_profile = profile_along(problem, s, r, index, lo, hi, values=profile_values, span=span)
         results = final_results(body, material, st, scs, p)
     finally:
         bar.close()
