@@ -163,7 +163,8 @@ def test_plots_of_a_fit(noisy, tmp_path):
         sf.plot.plot_profile(without)
 
 
-ESTIMATE_SCENE = """\
+def _estimate_scene(nodes: list[int], positions: list[list[float]], cap: float) -> str:
+    return f"""\
 [mesh]
 box = {{ size = [0.4, 0.1, 0.1], cells = [4, 2, 2] }}
 
@@ -193,8 +194,7 @@ def test_cli_estimate_prints_errors_and_bounds_and_writes_figures(noisy, tmp_pat
     bound = noisy.bind(build().mesh)
     nodes = np.flatnonzero(build().mesh.points[:, 0] >= 0.2)
     scene = tmp_path / "fit.toml"
-    scene.write_text(ESTIMATE_SCENE.format(nodes=nodes.tolist(), positions=bound.goal.tolist(),
-                                           cap=0.5 * TRUTH.lame_lambda), encoding="utf-8")
+    scene.write_text(_estimate_scene(nodes.tolist(), bound.goal.tolist(), 0.5 * TRUTH.lame_lambda), encoding="utf-8")
     out = tmp_path / "out"
     assert main(["estimate", str(scene), "--out", str(out)]) == 0
     text = capsys.readouterr().out

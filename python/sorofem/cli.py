@@ -12,7 +12,10 @@ Usage::
     sorofem --version
 
 ``run`` writes ``DIR/result.vtu``, ``DIR/summary.json``, ``DIR/shape.png`` and
-``DIR/convergence.png``. It only ever writes those names and never deletes anything.
+``DIR/convergence.png`` (and ``DIR/deformed.vtu`` with ``[output] deformed = true``). It only
+ever writes those names and never deletes anything. ``result.vtu`` holds the **rest** mesh with
+the point data ``displacement`` (the finite-element convention: ParaView's Warp By Vector on it
+shows the deformed body); ``deformed.vtu`` the same data on the deformed mesh.
 ``summary.json`` records, besides the solver report, the volume bookkeeping
 ``volume_change`` ((V_deformed - V_rest) / V_rest) and ``mean_log_j`` (sum V_e ln J_e / V),
 and for ``kind = "mixed"`` the pressure range ``min_pressure``/``max_pressure`` (Pa); the
@@ -35,7 +38,12 @@ write over a file the scene reads (the scene, its mesh, its ``[target]`` surface
 cables that bring ``[target]`` closest (:func:`sorofem.control`). Both use the scene's gravity
 and ``[solver]`` options (the Newton tolerance no looser than 1e-10) and write ``DIR/summary.json`` (estimate: the parameters, the material
 as (mu, lambda) and (E, nu), the residual, forward solves and history; control: actuation,
-distance, reachable, forward solves, history) and ``DIR/result.vtu`` (the final equilibrium).
+distance, reachable, forward solves, history), ``DIR/result.vtu`` (the final equilibrium) and
+``DIR/fit.png`` (goal against model points, misfit history). ``estimate`` prints each parameter
+with its standard error (rounded to it), says which ones ended on a bound (no standard error
+there: the covariance is that of the others, with them held), and, when the fit is poorly
+conditioned, profiles the misfit along the worst determined parameter (``summary.json``
+``profile``, ``DIR/profile.png``).
 An estimate that does not converge, or a control target that is not reachable, exits 3
 (the outputs are still written). They follow ``[output]`` ``directory``, ``summary`` and ``vtu``.
 
@@ -115,22 +123,23 @@ examples:
   sorofem schema --out scene.schema.json                                 # for editors
 
 exit codes:
-  0  success
-  2  bad input: scene, mesh or arguments (one 'error: ...' line on stderr)
-  3  the solver failed or an estimate/control did not converge (summary.json still written)
-  1  unexpected error (a bug: please report it with the traceback)
-  130 interrupted (Ctrl-C)
+  0    success
+  2    bad input: scene, mesh or arguments (one 'error: ...' line on stderr)
+  3    the solver failed, an estimate did not converge or a control target is not reachable
+       (summary.json is still written)
+  1    unexpected error (a bug: please report it with the traceback)
+  130  interrupted (Ctrl-C)
 
 documentation: docs/cli.md and docs/scene.md, or 'sorofem COMMAND --help'"""
 
 #: The epilog of ``sorofem convert --help``: what each output suffix writes.
 CONVERT_EPILOG = """\
 output formats (by the suffix of OUT):
-  .tet               sorofem's text format (full float precision)
-  .msh               Gmsh 4.1 ASCII
-  .node, .ele        TetGen (both STEM.node and STEM.ele are written)
+  .tet                 sorofem's text format (full float precision)
+  .msh                 Gmsh 4.1 ASCII
+  .node, .ele          TetGen (both STEM.node and STEM.ele are written)
   .stl .obj .ply .off  the boundary surface (outward-oriented triangles)
-  .vtu .vtk .mesh .inp .xdmf ...  any other volume format meshio writes (the tetrahedra)
+  .vtu .vtk .mesh ...  any other volume format meshio writes (the tetrahedra)
 
 input formats: .tet, Gmsh .msh (2.2, 4.x), TetGen .node/.ele, and any volume mesh meshio reads
 (.vtu, .vtk, .mesh, ...). A surface (.stl, .obj) is not a volume mesh: fill it with tetrahedra by
@@ -281,8 +290,8 @@ def _selected_outputs(scene: Any) -> list[str]:
         names = DYNAMICS_OUTPUT_NAMES
     else:
         wanted = {"result.vtu": "vtu", "summary.json": "summary", "shape.png": "png", "convergence.png": "png",
-                  "cables.vtu": "cables"}
-        names = OUTPUT_NAMES + (CABLE_OUTPUT_NAMES if scene.cables else ())
+                  "cables.vtu": "cables", "deformed.vtu": "deformed"}
+        names = OUTPUT_NAMES + (CABLE_OUTPUT_NAMES if scene.cables else ()) + ("deformed.vtu",)
     return [name for name in names if switches[wanted[name]]]
 
 
@@ -365,6 +374,8 @@ def _run(args: argparse.Namespace) -> int:
     summary = {**base, **result.to_dict()}
     if "result.vtu" in outputs:
         write_result(outputs["result.vtu"], result)
+    if "deformed.vtu" in outputs:
+        write_result(outputs["deformed.vtu"], result, points="deformed")
     if "cables.vtu" in outputs:
         write_cables(outputs["cables.vtu"], result)
     text = _write_summary(outputs, summary)

@@ -59,8 +59,8 @@ from ._formats import CELL_TAG_KEYS, Surface, meshio_read, read_surface, refuse_
 from .errors import InputError
 from .mesh import Mesh
 
-__all__ = ["read_mesh", "write_mesh", "write_result", "result_mesh", "read_surface", "Surface", "CELL_TAG_KEYS",
-           "meshio_read"]
+__all__ = ["read_mesh", "write_mesh", "write_result", "result_mesh", "read_points", "read_surface", "Surface",
+           "CELL_TAG_KEYS", "meshio_read"]
 
 PathLike = str | os.PathLike[str]
 
@@ -125,6 +125,58 @@ def write_mesh(path: PathLike, mesh: Mesh) -> None:
         ``path`` is the file the mesh was read from.
     """
     mesh.write(path)
+
+
+def read_points(path: PathLike) -> NDArray[np.float64]:
+    """Points ``(k, 3)`` from a file: NumPy's ``.npy`` (an array of shape ``(k, 3)``) or a text
+    table (``.csv``, ``.txt``, ``.dat``: three columns x, y, z separated by commas or
+    whitespace, ``#`` comments, at most one header line of column names).
+
+    Raises
+    ------
+    FileNotFoundError
+        No such file.
+    InputError
+        Not three finite columns, or a format other than these.
+
+    Examples
+    --------
+    >>> import numpy as np, sorofem as sf
+    >>> _ = open("/tmp/markers.csv", "w").write("x,y,z\n0.1,0,0.02\n0.2,0,0.02\n")
+    >>> sf.io.read_points("/tmp/markers.csv").shape
+    (2, 3)
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"points file not found: {path}")
+    suffix = path.suffix.lower()
+    if suffix == ".npy":
+        try:
+            arr = np.load(path, allow_pickle=False)
+        except (ValueError, OSError) as exc:
+            raise InputError(f"{path}: not a NumPy .npy array ({exc})") from None
+    elif suffix in (".csv", ".txt", ".dat"):
+        lines = [line.split("#", 1)[0].strip() for line in path.read_text(encoding="utf-8").splitlines()]
+        rows = [line.replace(",", " ").split() for line in lines if line]
+        try:
+            float(rows[0][0]) if rows else None
+        except ValueError:
+            rows = rows[1:]  # a header of column names
+        try:
+            arr = np.array([[float(v) for v in row] for row in rows], dtype=np.float64)
+        except ValueError as exc:
+            raise InputError(f"{path}: expected numbers in three columns x, y, z ({exc})") from None
+        if arr.size == 0 or any(len(row) != 3 for row in rows):
+            counts = sorted({len(row) for row in rows})
+            raise InputError(f"{path}: expected three columns x, y, z on every line, got {counts or 'no rows'}")
+    else:
+        raise InputError(f"{path}: expected a .npy array or a .csv/.txt table of points, got a {suffix or 'file without suffix'}")
+    if arr.ndim != 2 or arr.shape[1] != 3 or arr.dtype.kind not in "fiu":
+        raise InputError(f"{path}: expected an array of shape (k, 3), got shape {arr.shape} ({arr.dtype})")
+    arr = arr.astype(np.float64)
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{path}: expected finite coordinates")
+    return arr
 
 
 def result_mesh(

@@ -22,6 +22,7 @@ Examples
 
 from __future__ import annotations
 
+import math
 import os
 from typing import Any, Sequence
 
@@ -180,7 +181,7 @@ def plot_rest_and_deformed(
         An unknown ``color_by``, or ``"pressure"`` for a result without pressure.
     """
     from matplotlib import cm, colormaps, colors
-    from matplotlib.ticker import FixedLocator, MaxNLocator
+    from matplotlib.ticker import FixedLocator, MaxNLocator, ScalarFormatter
     from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
     mesh = result.mesh
@@ -243,17 +244,21 @@ def plot_rest_and_deformed(
             ticks = MaxNLocator(nbins=4).tick_values(lo_tick, hi_tick)
             ticks = [t for t in ticks if lo_tick + margin * keep_off[0] - 1e-12 * length <= t
                      <= hi_tick - margin * keep_off[1] + 1e-12 * length]
-        else:
-            ticks = [float(f"{mid:.2g}")]
+        else:  # one round value near the middle (0 rather than -3e-05 on a centred axis)
+            step = 10.0 ** (math.floor(math.log10(length)) - 1) if length > 0 else 1.0
+            ticks = [round(mid / step) * step + 0.0]
         axis.set_major_locator(FixedLocator(ticks))
-    ax.set_xlabel("x [m]", labelpad=8)
-    ax.set_ylabel("y [m]", labelpad=8)
-    ax.set_zlabel("z [m]", labelpad=12)
+        axis.set_major_formatter(ScalarFormatter(useOffset=False))
+    # Labels clear their tick labels; a short axis has one tick, and its label stays close.
+    pads = [(8 if axis_long else 2) + (4 if k == 2 else 0) for k, axis_long in enumerate(span > 0.3 * span.max())]
+    ax.set_xlabel("x [m]", labelpad=pads[0])
+    ax.set_ylabel("y [m]", labelpad=pads[1])
+    ax.set_zlabel("z [m]", labelpad=pads[2])
     ax.view_init(elev=20, azim=-60)
 
     mappable = cm.ScalarMappable(norm=norm, cmap=cmap)
     mappable.set_array(values)
-    fig.colorbar(mappable, ax=ax, shrink=0.6, pad=0.12, label=bar_label)
+    fig.colorbar(mappable, ax=ax, shrink=0.6, pad=0.15, label=bar_label)
     ax.set_title(title if title is not None else f"rest (grey) and deformed; max |u| = {vmax_u:.3g} m")
     if path is not None:
         fig.savefig(os.fspath(path))
