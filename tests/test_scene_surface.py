@@ -17,7 +17,10 @@ from sorofem.cli import main
 
 DATA = Path(__file__).resolve().parent.parent / "examples" / "data"
 
-SCENE = """\
+
+def _scene_text(mesh: str) -> str:
+    """A scene standing on z = 0, its [mesh] table ``mesh``."""
+    return f"""\
 [mesh]
 {mesh}
 
@@ -38,7 +41,7 @@ def _write(tmp_path: Path, mesh: str, extra: str = "") -> Path:
     for name in ("h_robot.stl", "finger.stl"):
         (tmp_path / name).write_bytes((DATA / name).read_bytes())
     path = tmp_path / "scene.toml"
-    path.write_text(SCENE.format(mesh=mesh) + extra, encoding="utf-8")
+    path.write_text(_scene_text(mesh) + extra, encoding="utf-8")
     return path
 
 

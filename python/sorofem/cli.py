@@ -76,6 +76,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from ._text import plural
 from ._version import __version__
 from .cables import placement_counts, write_cables
 from .convert import run_command as convert_command
@@ -439,8 +440,9 @@ def _run_dynamics(
     elif not args.quiet:
         print(f"{scene.path.name}: {scene.mesh.n_nodes} nodes, {scene.mesh.n_tets} tets, {scene.formulation}, "
               f"{len(scene.cables)} cable(s)")
-        print(f"{summary['steps']} steps of {summary['dt']:g} s: {summary['newton_iterations']} Newton iterations "
-              f"(max {summary['max_iterations_per_step']} per step), {summary['cutbacks']} cutbacks, "
+        print(f"{plural(summary['steps'], 'step')} of {summary['dt']:g} s: "
+              f"{plural(summary['newton_iterations'], 'Newton iteration')} "
+              f"(max {summary['max_iterations_per_step']} per step), {plural(summary['cutbacks'], 'cutback')}, "
               f"{summary['timings']['simulate']:.3g} s")
         print(f"final kinetic energy {summary['final_kinetic_energy']:.3e} J (max {summary['max_kinetic_energy']:.3e} J), "
               f"max displacement {summary['max_displacement']:.6g} m")

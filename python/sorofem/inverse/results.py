@@ -242,7 +242,8 @@ class FitResult:
     residual
         Root-mean-square distance of the observed points from their goals, m.
     forward_solves
-        Static solves, all starts together (warm-started; failed attempts included).
+        Static solves, all starts and the profile together (warm-started; failed attempts
+        included).
     newton_iterations
         Newton iterations over those solves.
     iterations
