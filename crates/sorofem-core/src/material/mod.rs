@@ -7,11 +7,18 @@
 //! can be made of) and [`ElementMaterial`] (one element's model at its parameters) list them,
 //! one arm each.
 
+pub mod isochoric;
 pub mod law;
+pub mod mooney_rivlin;
 pub mod neo_hookean;
+pub mod ogden;
+pub mod yeoh;
 
 pub use law::{Hyperelastic, RestParamGradient};
+pub use mooney_rivlin::MooneyRivlin;
 pub use neo_hookean::{NeoHookean, Response, Volumetric};
+pub use ogden::Ogden;
+pub use yeoh::Yeoh;
 
 use crate::error::{Error, Result};
 
