@@ -21,7 +21,7 @@ use crate::cables::{
     check_pull, check_tendon_command, embed, CableSlot, CableSpec, PointPlacement,
 };
 use crate::energy::elastic::PressureCompliance;
-use crate::energy::{CableTerm, ElasticTerm, LumpedMass, TendonCommand, TendonTerm};
+use crate::energy::TendonCommand;
 pub use crate::energy::{Formulation as ElementFormulation, PressureMass};
 use crate::error::{check_finite, Error, Result};
 use crate::linear::{FactorKind, SparseFactor};
@@ -29,6 +29,7 @@ use crate::material::{shear_modulus, MaterialModel, Volumetric};
 use crate::mesh::TetMesh;
 use crate::newton::NewtonOptions;
 use std::sync::Arc;
+pub use terms::TermSpecs;
 use terms::Terms;
 
 /// The discretisation of the volumetric response.
@@ -57,9 +58,6 @@ pub struct Model {
     pub(crate) formulation: Formulation,
     pub(crate) layout: DofLayout,
     pub(crate) terms: Terms,
-    pub(crate) placements: Vec<Vec<PointPlacement>>,
-    /// Where each cable (in the order given) lives: spring chain or tendon.
-    pub(crate) slots: Vec<CableSlot>,
     /// The constructor's volumetric measure: the Neo-Hookean model's unless told otherwise.
     pub(crate) volumetric: Volumetric,
     pub(crate) assembler: Assembler,
@@ -101,6 +99,20 @@ impl Model {
         volumetric: Volumetric,
         cables: &[CableSpec],
     ) -> Result<Self> {
+        let specs = TermSpecs {
+            cables: cables.to_vec(),
+        };
+        Self::try_new_with_terms(mesh, fixed_nodes, formulation, volumetric, &specs)
+    }
+
+    /// [`Model::try_new`] with the terms `specs` describes beside elasticity and gravity.
+    pub fn try_new_with_terms(
+        mesh: Arc<TetMesh>,
+        fixed_nodes: &[i64],
+        formulation: Formulation,
+        volumetric: Volumetric,
+        specs: &TermSpecs,
+    ) -> Result<Self> {
         let n = mesh.n_nodes();
         let mut fixed_set = vec![false; n];
         let mut fixed = Vec::with_capacity(fixed_nodes.len());
@@ -123,46 +135,13 @@ impl Model {
             fixed_set[node as usize] = true;
             fixed.push(node as usize);
         }
-        let n_tets = mesh.n_tets();
-        let embedded = embed(&mesh, cables)?;
-        let n_cables = embedded.slots.len();
-        let index_of = |springs: bool| -> Vec<usize> {
-            (embedded.slots.iter().enumerate())
-                .filter(|(_, slot)| matches!(slot, CableSlot::Springs(_)) == springs)
-                .map(|(c, _)| c)
-                .collect()
-        };
-        let (spring_index, tendon_index) = (index_of(true), index_of(false));
+        let embedded = embed(&mesh, &specs.cables)?;
         let layout = DofLayout {
             n_nodes: n,
             n_free_nodes: embedded.free_nodes.len(),
             pressures: matches!(formulation, Formulation::Mixed { .. }),
         };
-        let element_formulation = match formulation {
-            Formulation::Standard => ElementFormulation::Standard,
-            Formulation::Mixed { mass } => ElementFormulation::Mixed {
-                pressure_offset: layout.n_displacement(),
-                mass,
-            },
-        };
-        let terms = Terms {
-            elastic: ElasticTerm::neo_hookean(
-                mesh.clone(),
-                &vec![1.0; n_tets],
-                &vec![1.0; n_tets],
-                volumetric,
-                element_formulation,
-            ),
-            cables: CableTerm::with_param_index(embedded.cables, spring_index, n_cables),
-            tendons: TendonTerm::new(embedded.tendons, tendon_index, n_cables),
-            mass: LumpedMass {
-                mesh: mesh.clone(),
-                density: vec![0.0; n_tets],
-                points: (embedded.free_nodes.iter().enumerate())
-                    .map(|(i, &(_, mass))| (layout.free_node(i), mass))
-                    .collect(),
-            },
-        };
+        let terms = Terms::new(&mesh, &layout, formulation, volumetric, embedded, specs)?;
         let fixed_dofs = layout.fixed_dofs(&fixed);
         // The symbolic factorisation needs only the pattern: it runs beside the element plans.
         let (assembler, factor) = match formulation {
@@ -196,8 +175,6 @@ impl Model {
             formulation,
             layout,
             terms,
-            placements: embedded.placements,
-            slots: embedded.slots,
             volumetric,
             assembler,
             factor: factor?,
@@ -253,7 +230,7 @@ impl Model {
     /// Rest length of each segment of each cable (m), between the points the cable is attached
     /// to (a snapped point sits on the mesh, not where the user put it).
     pub fn cable_rest_lengths(&self) -> Vec<Vec<f64>> {
-        (self.slots.iter())
+        (self.terms.slots.iter())
             .map(|slot| match *slot {
                 CableSlot::Springs(i) => self.terms.cables.cables[i].rest_lengths.clone(),
                 CableSlot::Tendon(i) => self.terms.tendons.tendons[i].rest_lengths.clone(),
@@ -263,24 +240,25 @@ impl Model {
 
     /// Where each cable point was placed (embedded, snapped, free node or anchor).
     pub fn cable_placements(&self) -> &[Vec<PointPlacement>] {
-        &self.placements
+        &self.terms.placements
     }
 
     /// Number of cables, spring chains and tendons.
     pub fn n_cables(&self) -> usize {
-        self.slots.len()
+        self.terms.slots.len()
     }
 
     /// Where cable `cable` lives, or `Err` naming it when out of range.
     pub fn cable_slot(&self, cable: usize) -> Result<CableSlot> {
-        self.slots
+        self.terms
+            .slots
             .get(cable)
             .copied()
             .ok_or_else(|| Error::IndexOutOfRange {
                 param: "cable".into(),
                 position: 0,
                 index: cable as i64,
-                len: self.slots.len(),
+                len: self.terms.slots.len(),
             })
     }
 

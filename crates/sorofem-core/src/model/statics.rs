@@ -57,9 +57,9 @@ impl Model {
         let start_tensions = z[problem.constraints.offset..].to_vec();
         // Only the prescribed displacements are scaled by the load factor: the initial guess is
         // kept as given for the free DOFs, which is what warm starts need.
-        // The Newton loop runs on a worker of the thread pool. On the calling thread, its
-        // single-threaded factorisations left both workers asleep for 15 ms at a time, and every
-        // element pass after one was about 1.5x slower (12k-tet cantilever, 2 cores).
+        // The Newton loop runs on a worker of the thread pool: from the calling thread, its
+        // single-threaded factorisations let the workers fall asleep and the element passes
+        // after them ran slower (docs/theory.md, "Newton's method").
         let outcome = rayon::scope(|_| newton::solve(&mut problem, &mut z, options));
         let report = match outcome {
             Ok(report) => report,
@@ -119,7 +119,7 @@ impl Model {
         let springs_points = self.terms.cables.points_at(z);
         let springs_tensions = self.terms.cables.tensions_at(z);
         let mut out = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-        for slot in &self.slots {
+        for slot in &self.terms.slots {
             match *slot {
                 CableSlot::Springs(i) => {
                     out.0.push(springs_points[i].clone());
