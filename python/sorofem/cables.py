@@ -10,7 +10,7 @@ A cable is an ordered chain of points, of one of two **models**:
   ``L <= L0 - d``, taut or slack, exactly) or by the tension ``T`` (N). See
   :meth:`sorofem.Body.pull` and docs/theory.md.
 
-The points of either model Each point is embedded in the tetrahedron that
+Each point of either model is embedded in the tetrahedron that
 contains it (it moves with the material, barycentrically), snapped onto the nearest
 tetrahedron if it lies within ``snap_tolerance`` outside the mesh, turned into a free node
 with its own mass (``outside="free"``), or fixed in the world (the first point, with

@@ -231,7 +231,7 @@ def build_dynamics(check: Checker, table: dict[str, Any], body: Body) -> dict[st
         if len(schedule) != n_cables:
             raise check.error(
                 "dynamics.actuation",
-                f"expected one list of [time, alpha] keyframes per [[cable]] ({n_cables}), got {len(schedule)} entries",
+                f"expected one list of [time, value] keyframes per [[cable]] ({n_cables}), got {len(schedule)} entries",
             )
         options["actuation"] = []
         for c, frames in enumerate(schedule):
@@ -239,6 +239,15 @@ def build_dynamics(check: Checker, table: dict[str, Any], body: Body) -> dict[st
                 options["actuation"].append(Keyframes(frames))
             except InputError as exc:
                 raise check.error(f"dynamics.actuation[{c}]", str(exc)) from None
+            values = [value for _, value in frames]
+            kind = body.commands[c][0]
+            if kind == "actuation" and min(values) <= 0:
+                raise check.error(f"dynamics.actuation[{c}]", f"alphas must be > 0, got {min(values):g}")
+            if kind == "tension" and min(values) < 0:
+                raise check.error(f"dynamics.actuation[{c}]", f"tensions must be >= 0 N, got {min(values):g}")
+            if kind == "pull" and max(values) >= body.cables[c].length:
+                raise check.error(f"dynamics.actuation[{c}]", f"pulls must stay below the tendon's rest length "
+                                  f"{body.cables[c].length:.6g} m, got {max(values):g} m")
     return options
 
 
