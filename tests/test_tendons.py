@@ -221,7 +221,7 @@ def test_control_finds_the_pull_that_reaches_a_target():
 
 SCENE = """
 [mesh]
-box = {{ size = [0.4, 0.1, 0.1], cells = [8, 2, 2] }}
+box = { size = [0.4, 0.1, 0.1], cells = [8, 2, 2] }
 
 [material]
 youngs_modulus = 66e3
@@ -229,7 +229,7 @@ poisson_ratio = 0.45
 density = 1080
 
 [[fixed]]
-box = {{ min = [-1e-9, -1, -1], max = [1e-9, 1, 1] }}
+box = { min = [-1e-9, -1, -1], max = [1e-9, 1, 1] }
 
 [loads]
 gravity = [0, 0, -9.81]
@@ -240,13 +240,13 @@ direction = [1, 0, 0]
 length = 0.38
 divisions = 8
 model = "tendon"
-{command}
+pull = 0.01
 """
 
 
 def test_scene_tendon_runs_and_reports_tension_and_pull(tmp_path, capsys):
     scene = tmp_path / "tendon.toml"
-    scene.write_text(SCENE.format(command="pull = 0.01"))
+    scene.write_text(SCENE)
     out = tmp_path / "out"
     assert main(["run", str(scene), "--out", str(out)]) == 0
     assert "tendon" in capsys.readouterr().out
@@ -259,7 +259,23 @@ def test_scene_tendon_runs_and_reports_tension_and_pull(tmp_path, capsys):
 @pytest.mark.parametrize("command", ["pull = 0.01\ntension = 2.0", "tension = -1.0", "pull = 1.0"])
 def test_bad_scene_tendons_exit_2(tmp_path, capsys, command):
     scene = tmp_path / "bad.toml"
-    scene.write_text(SCENE.format(command=command))
+    scene.write_text(SCENE.replace("pull = 0.01", command))
     assert main(["run", str(scene), "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and ("pull" in err or "tension" in err), err
+
+
+def test_a_spring_cable_keeps_its_alpha_bounds_and_keyframes_positive(tmp_path):
+    """alpha <= 0 is no longer a structural mistake (a tendon's pull or tension may be 0) but
+    stays an error for a spring cable, named by its key."""
+    springs = SCENE.replace('model = "tendon"\npull = 0.01', "stiffness = 1e5")
+    tip = "[target]\nnodes = [1]\npositions = [[0.4, 0, 0]]\n"
+    for extra, key in [
+        (tip + "[control]\nbounds = [[0, 1.0]]\n", "control.bounds"),
+        ("[dynamics]\ndt = 0.01\nsteps = 2\nactuation = [[[0.0, 1.0], [0.2, 0.0]]]\n", "dynamics.actuation[0]"),
+    ]:
+        path = tmp_path / "springs.toml"
+        path.write_text(springs + extra)
+        with pytest.raises(sf.SceneError) as info:
+            sf.Scene.load(path)
+        assert info.value.key == key, str(info.value)
