@@ -217,6 +217,33 @@ def test_a_drag_redirects_the_move_under_way(server) -> None:
     assert not view._moving and view._targets == {}
 
 
+def test_a_node_pulled_with_a_spring(server) -> None:
+    """Shift + drag: the grabbed node carries the spring force k (anchor - x) at equilibrium."""
+    scene = sf.Scene.load(SCENES / "cable_cantilever.toml")
+    view = build_view(scene, server)
+    before = view.result.positions.copy()
+    tip = int(np.argmax(before[:, 0] + before[:, 2]))  # the free end's upper edge
+    assert view.grab(before[tip] + 1e-4) == tip and view.dragged == tip
+    # Reciprocity (Maxwell-Betti): the measured compliance is symmetric and positive definite.
+    compliance = view._compliance
+    np.testing.assert_allclose(compliance, compliance.T, atol=2e-3 * np.abs(compliance).max())
+    assert np.all(np.linalg.eigvalsh(0.5 * (compliance + compliance.T)) > 0)
+    anchor = before[tip] + np.array([-0.05, 0.0, 0.15])
+    view.drag_to(anchor)
+    x = view.result.positions[tip]
+    k = view.drag_stiffness
+    np.testing.assert_allclose(view.drag_force, k * (anchor - x), rtol=1e-5, atol=1e-9 * k)
+    assert x[2] > before[tip][2] + 0.02 and np.linalg.norm(view.drag_force) > 1.0  # lifted, by a real force
+    assert f"pulling node {tip}" in view.status.content and view.drag_line.visible
+    # The equilibrium of the body with that force, solved independently.
+    reference = sf.solve_static(rebuild_body(view.body, "standard"), scene.gravity, **scene.solver)
+    np.testing.assert_allclose(view.result.positions, reference.positions, atol=1e-7)
+    view.release()
+    assert view.dragged is None and not view.drag_line.visible
+    np.testing.assert_allclose(view.body.forces, 0.0, atol=1e-12)
+    np.testing.assert_allclose(view.result.positions, before, atol=1e-7)
+
+
 # ---------------------------------------------------------------------------
 # Playback of a trajectory
 
@@ -373,15 +400,19 @@ def test_single_frame_trajectory_does_not_play(server) -> None:
 
 
 def test_cli_plays_a_run_folder_and_a_dynamic_scene(tmp_path, trajectory, monkeypatch, capsys) -> None:
-    """``sorofem view`` (viewer.serve) with the serving loop replaced by an immediate stop."""
+    """``sorofem view`` (viewer.serve) with the serving loop replaced by two tabs that connect,
+    then an immediate stop."""
     import sorofem.viewer as viewer
 
     served = []
 
-    def serve_once(server, on_stop=None):
-        served.append(server)
-        if on_stop is not None:
-            on_stop()
+    def serve_once(server, on_stop):
+        tabs = on_stop.__self__  # PerClient.close: one view per tab
+        with _tabs(server, 2):
+            first, second = tabs.wait_for(2)
+            assert first is not second and first.server is not second.server
+            served.append(type(first).__name__)
+        on_stop()
         server.stop()
 
     monkeypatch.setattr(viewer.serving, "wait_until_interrupted", serve_once)
@@ -397,7 +428,7 @@ def test_cli_plays_a_run_folder_and_a_dynamic_scene(tmp_path, trajectory, monkey
     assert "frames" not in capsys.readouterr().out
     with pytest.raises(sf.InputError, match=r"\[dynamics\]"):
         viewer.serve(SCENES / "cantilever.toml", port=_free_port(), trajectory=True)
-    assert len(served) == 3
+    assert served == ["TrajectoryView", "TrajectoryView", "View"]
 
 
 # ---------------------------------------------------------------------------
@@ -546,8 +577,8 @@ def _tabs(server, count: int):
             socket_.close()
 
 
-def test_each_tab_has_its_own_view(server) -> None:
-    scene = sf.Scene.load(SCENES / "cable_cantilever.toml")
+def test_each_tab_has_its_own_view(server, tmp_path) -> None:
+    scene = sf.Scene.load(_dynamic_scene(tmp_path))
     equilibrium = scene.solve()
     tabs = per_client(server, lambda client: build_view(scene, client, body=scene.body.replace(),
                                                         equilibrium=equilibrium))
@@ -578,6 +609,10 @@ def test_each_tab_has_its_own_view(server) -> None:
                 body = rebuild_body(tab.body, tab.body.formulation)
                 reference = sf.solve_static(body, scene.gravity, **scene.solver)
                 np.testing.assert_allclose(tab.result.positions, reference.positions, atol=1e-7)
+            # A tab's simulation plays in that tab only.
+            motion = first.simulate(play=False)
+            assert motion is not None and motion.server is first.server and second.motion is None
+            assert not first.sliders[0].visible and second.sliders[0].visible and second.surface.visible
         assert _wait(lambda: not tabs.views), "closed tabs were not forgotten"
     finally:
         tabs.close()
@@ -711,4 +746,30 @@ def test_browser_cancels_a_simulation(server, tmp_path) -> None:
             assert view.motion is None and not view.simulate_button.disabled
     finally:
         view.close()
+    assert not errors, errors
+
+
+@browser_test
+def test_browser_pulls_a_node_with_shift_drag(server) -> None:
+    view = build_view(sf.Scene.load(SCENES / "cable_cantilever.toml"), server)
+    before = view.result.positions.copy()
+    pulled: list[float] = []
+    with _browser_page(server, "cable 0 alpha") as (page, errors):
+        page.wait_for_timeout(1000)  # the surface drawn
+        box = page.locator("canvas").first.bounding_box()
+        x, y = box["x"] + 0.485 * box["width"], box["y"] + 0.667 * box["height"]  # on the beam's middle
+        page.keyboard.down("Shift")
+        page.mouse.move(x, y)
+        page.mouse.down()
+        for k in range(1, 11):
+            page.mouse.move(x, y - 8 * k)  # upwards
+            page.wait_for_timeout(60)
+        assert _wait(lambda: pulled.append(float(np.linalg.norm(view.drag_force))) or pulled[-1] > 1.0, 10.0), \
+            "shift + drag did not pull the node"
+        grabbed = view.dragged
+        assert grabbed is not None and view.result.positions[grabbed][2] > before[grabbed][2] + 0.005
+        page.mouse.up()
+        page.keyboard.up("Shift")
+        assert _wait(lambda: view.dragged is None, 10.0), "releasing the mouse did not let go"
+        np.testing.assert_allclose(view.result.positions, before, atol=1e-7)
     assert not errors, errors

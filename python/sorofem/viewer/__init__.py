@@ -5,7 +5,9 @@ The view shows the deformed boundary surface coloured by displacement magnitude 
 to the current maximum) or, chosen in the "colour by" dropdown, by von Mises stress, pressure
 (mixed formulation) or J (diverging maps centred on 0 and 1), with a colour bar in mm or kPa;
 the cables as red polylines, the fixed nodes as blue points and, optionally, the rest shape or
-the surface as a wireframe in the same colours. The control panel has one slider per cable that
+the surface as a wireframe in the same colours. Shift + drag on the body pulls the node under
+the pointer with a spring (:meth:`View.grab`, :meth:`View.drag_to`, :meth:`View.release`), as
+runSofa and MuJoCo's viewer do. The control panel has one slider per cable that
 moves its actuation alpha by continuation from the equilibrium shown, in steps of at most
 :data:`sorofem.cables.DEFAULT_ALPHA_STEP` as :func:`sorofem.actuate` does, and a dropdown that
 switches between the standard and the mixed formulation. A scene with ``[dynamics]`` is shown at

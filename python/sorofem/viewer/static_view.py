@@ -29,6 +29,10 @@ from .style import (
     CABLE_COLOUR,
     FIXED_COLOUR,
     REST_COLOUR,
+    DRAG_COLOUR,
+    DRAG_ITERATIONS,
+    DRAG_STIFFNESS_PER_MU,
+    DRAG_TOLERANCE,
     SIMULATE_LABEL,
     WIREFRAME_THICKNESS,
 )
@@ -127,6 +131,19 @@ class View:
     _moving: bool = field(default=False, repr=False)
     _cancel: threading.Event = field(default_factory=threading.Event, repr=False)
     _closed: bool = field(default=False, repr=False)
+    #: Stiffness of the spring that pulls a grabbed node towards the pointer, N/m.
+    drag_stiffness: float = 0.0
+    #: The grabbed node (shift + drag on the surface), or None; its spring's anchor (the
+    #: pointer, m) and force on the node (N).
+    dragged: int | None = None
+    drag_anchor: NDArray[np.float64] | None = field(default=None, repr=False)
+    drag_force: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3), repr=False)
+    #: The spring drawn from the grabbed node to the pointer (line segments, hidden otherwise).
+    drag_line: Any = field(default=None, repr=False)
+    #: Node displacement per unit force at the grabbed node, ``(3, 3)`` m/N, measured at the grab.
+    _compliance: NDArray[np.float64] | None = field(default=None, repr=False)
+    _pending_anchor: NDArray[np.float64] | None = field(default=None, repr=False)
+    _pulling: bool = field(default=False, repr=False)
     #: The static view's scene nodes and controls (hidden while a motion plays).
     _static_nodes: list[Any] = field(default_factory=list, repr=False)
     _static_controls: list[Any] = field(default_factory=list, repr=False)
@@ -218,6 +235,124 @@ class View:
                 return
             self.body = body
             self._show(result)
+
+    # -- pulling a node with a spring ---------------------------------------------------
+
+    def grab(self, point: Any) -> int:
+        """Grab the surface node nearest to ``point`` ``(3,)`` m (where a shift + drag on the
+        surface starts) with a spring of stiffness :attr:`drag_stiffness`, anchored there.
+
+        Its compliance (node displacement per unit force, ``(3, 3)``) is measured by three
+        small probe solves; :meth:`drag_to` uses it to solve the spring's force.
+
+        Returns
+        -------
+        int
+            The grabbed node.
+        """
+        with self._lock:
+            if self.dragged is not None:
+                self._release()
+            point = np.asarray(point, dtype=np.float64).reshape(3)
+            vertices = self.surface_vertices
+            node = int(self.surface_nodes[np.argmin(np.linalg.norm(vertices - point, axis=1))])
+            lo, hi = self.body.mesh.bounds
+            probe = 1e-4 * self.drag_stiffness * float(np.linalg.norm(hi - lo))
+            compliance = np.zeros((3, 3))
+            for axis in range(3):
+                force = np.zeros(3)
+                force[axis] = probe
+                self.body.add_force([node], force)
+                try:
+                    probed = self._solve(self.body, self.result)
+                finally:
+                    self.body.add_force([node], -force)
+                compliance[:, axis] = (probed.positions[node] - self.result.positions[node]) / probe
+            self.dragged, self._compliance = node, compliance
+            self.drag_anchor = self.result.positions[node].copy()
+            self.drag_force = np.zeros(3)
+            return node
+
+    def drag_to(self, point: Any) -> None:
+        """Move the grabbed node's spring anchor to ``point`` ``(3,)`` m and solve for the
+        equilibrium in which the node carries the spring force ``k (anchor - x_node)``.
+
+        The force is found by a quasi-Newton iteration on ``F = k (p - x(F))``: the Jacobian
+        ``I + k C`` starts from the compliance ``C`` measured at the grab and follows Broyden's
+        update (one warm-started solve per iteration, at most ``DRAG_ITERATIONS``). Anchors
+        that arrive while it runs (a drag goes on) redirect it: the last one wins."""
+        with self._targets_lock:
+            self._pending_anchor = np.asarray(point, dtype=np.float64).reshape(3)
+            if self._pulling:
+                return
+            self._pulling = True
+        try:
+            while True:
+                with self._targets_lock:
+                    anchor, self._pending_anchor = self._pending_anchor, None
+                    if anchor is None:
+                        self._pulling = False
+                        return
+                self._pull(anchor)
+        except BaseException:
+            with self._targets_lock:
+                self._pulling = False
+            raise
+
+    def _pull(self, anchor: NDArray[np.float64]) -> None:
+        with self._lock:
+            node, compliance = self.dragged, self._compliance
+            if node is None or compliance is None:
+                return
+            self.drag_anchor = anchor
+            k = self.drag_stiffness
+            result = self.result
+            for _ in range(DRAG_ITERATIONS):
+                residual = self.drag_force - k * (anchor - result.positions[node])
+                if np.linalg.norm(residual) <= DRAG_TOLERANCE * max(np.linalg.norm(self.drag_force), 1e-12):
+                    break
+                step = -np.linalg.solve(np.eye(3) + k * compliance, residual)
+                self.body.add_force([node], step)
+                try:
+                    solved = self._solve(self.body, result)
+                except SorofemError as exc:
+                    self.body.add_force([node], -step)
+                    self._report_error(f"pulling node {node}: no equilibrium ({exc}); kept the last one")
+                    break
+                # Broyden's update keeps the compliance true to the secant as the body deforms.
+                moved = solved.positions[node] - result.positions[node]
+                compliance = compliance + np.outer(moved - compliance @ step, step) / float(step @ step)
+                self.drag_force = self.drag_force + step
+                result = solved
+            self._compliance = compliance
+            self._show(result)
+
+    def release(self) -> None:
+        """Let go of the grabbed node (the end of a shift + drag): its spring force is removed
+        and the body re-solved."""
+        with self._lock:
+            self._release()
+
+    def _release(self) -> None:
+        if self.dragged is None:
+            return
+        self.body.add_force([self.dragged], -self.drag_force)
+        self.dragged, self.drag_anchor, self._compliance = None, None, None
+        self.drag_force = np.zeros(3)
+        try:
+            result = self._solve(self.body, self.result)
+        except SorofemError as exc:
+            self._report_error(f"release: no equilibrium ({exc})")
+            return
+        self._show(result)
+
+    def _on_drag(self, event: Any) -> None:
+        if event.phase == "start":
+            self.grab(event.start_position)
+        elif event.phase == "update" and self.dragged is not None:
+            self.drag_to(event.end_position)
+        elif event.phase == "end":
+            self.release()
 
     # -- the motion --------------------------------------------------------------------
 
@@ -387,6 +522,10 @@ class View:
                                                                                     self.colour_by))
         for c, handle in enumerate(self.cables):
             handle.points = self._cable_segments(c).astype(np.float32)
+        if self.drag_line is not None:
+            if self.dragged is not None and self.drag_anchor is not None:
+                self.drag_line.points = np.array([[result.positions[self.dragged], self.drag_anchor]], dtype=np.float32)
+            self.drag_line.visible = self.dragged is not None
         if self.status is not None:
             self.status.content = self._summary()
 
@@ -401,6 +540,8 @@ class View:
             lines.append(f"last slider move: {self.move_steps} alpha step(s), {self.move_iterations} Newton iterations")
         for c, tension in enumerate(r.cable_tensions):
             lines.append(f"cable {c}: alpha {r.actuations[c]:.3f}, tension {tension.min():.3g} .. {tension.max():.3g} N")
+        if self.dragged is not None:
+            lines.append(f"pulling node {self.dragged} with {np.linalg.norm(self.drag_force):.3g} N")
         return "  \n".join(lines)
 
     def _report_error(self, message: str, label: str = "error") -> None:
@@ -489,10 +630,17 @@ def build_view(
             thickness=3.0, thickness_units="screen",
         ))
     view._static_nodes += view.cables
+    mu = body.material.per_element(body.mesh.n_tets)[0]
+    view.drag_stiffness = DRAG_STIFFNESS_PER_MU * float(np.mean(mu)) * size
+    view.drag_line = server.scene.add_line_segments("/drag", np.zeros((1, 2, 3), dtype=np.float32), DRAG_COLOUR,
+                                                    thickness=3.0, thickness_units="screen", visible=False)
+    view.surface.on_drag("left", modifier="shift")(view._on_drag)
+    view._static_nodes.append(view.drag_line)
 
     gui = server.gui
     header = gui.add_markdown(f"**{scene.path.name}**: {body.mesh.n_nodes} nodes, {body.mesh.n_tets} tets, "
-                              f"{len(body.cables)} cable(s)")
+                              f"{len(body.cables)} cable(s)  \nshift + drag on the body: pull a node with a "
+                              f"spring of {view.drag_stiffness:.3g} N/m")
     view.formulation = gui.add_dropdown("formulation", list(FORMULATIONS), initial_value=body.formulation)
     view.formulation.on_update(lambda event: view.set_formulation(event.target.value))
     for c, alpha in enumerate(body.actuations):
