@@ -720,6 +720,12 @@ def test_browser_tabs_have_their_own_controls(server) -> None:
         with _browser_pages(server, "cable 0 alpha", count=2) as (pages, errors):
             first, second = tabs.wait_for(2)  # in the order the pages connected
             assert "|u| [mm]" in pages[0].content()  # the colour bar
+            # Each tab's camera looks at the body (the page reports its camera back).
+            lo, hi = scene.body.mesh.bounds
+            centre, size = 0.5 * (lo + hi), float(np.linalg.norm(hi - lo))
+            for tab in (first, second):
+                assert _wait(lambda tab=tab: np.linalg.norm(tab.server.camera.look_at - centre) < 1e-3 * size, 10.0), \
+                    f"the camera looks at {tab.server.camera.look_at}, not at the body's centre {centre}"
             pages[0].get_by_text("wireframe (see the cables)").first.click()
             assert _wait(lambda: first.wireframe.visible, 10.0), "the click did not reach the first tab's view"
             first.sliders[0].value = 0.7

@@ -47,9 +47,14 @@ def wait_until_interrupted(server: Any, on_stop: Any = None) -> None:
 def place_camera(target: Any, look_at: Any, position: Any) -> None:
     """Point the camera of ``target``: a ``viser.ViserServer`` (the camera each new tab starts
     with) or a ``viser.ClientHandle`` (that tab's camera)."""
-    camera = target.initial_camera if hasattr(target, "initial_camera") else target.camera
-    camera.look_at = tuple(float(v) for v in look_at)
-    camera.position = tuple(float(v) for v in position)
+    look_at, position = tuple(float(v) for v in look_at), tuple(float(v) for v in position)
+    if hasattr(target, "initial_camera"):
+        target.initial_camera.look_at, target.initial_camera.position = look_at, position
+    else:
+        # A tab moves its camera keeping the view direction when the position changes (the
+        # target moves along): the position first, then what it looks at.
+        target.camera.position = position
+        target.camera.look_at = look_at
 
 
 @dataclass
