@@ -509,6 +509,8 @@ class View:
                 self.colour_dropdown.value = self.colour_by
         self.result = result
         self.solves += int(count)
+        if self._closed:
+            return  # the tab has gone: nothing to draw on
         colours = self.surface_colours()
         vertices = self.surface_vertices
         if self.surface is not None:
