@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 
 from ..body import FORMULATIONS, Body
 from ..cables import DEFAULT_ALPHA_STEP
-from ..errors import ConvergenceError, InputError, SorofemError
+from ..errors import InputError, SorofemError
 from ..plot import COLOR_FIELDS
 from ..scene import Scene
 from ..static import StaticResult, actuate
@@ -27,12 +27,12 @@ from .style import (
     ALPHA_RANGE,
     ALPHA_STEP,
     CABLE_COLOUR,
-    FIXED_COLOUR,
-    REST_COLOUR,
     DRAG_COLOUR,
     DRAG_ITERATIONS,
     DRAG_STIFFNESS_PER_MU,
     DRAG_TOLERANCE,
+    FIXED_COLOUR,
+    REST_COLOUR,
     SIMULATE_LABEL,
     WIREFRAME_THICKNESS,
 )
