@@ -187,11 +187,13 @@ def test_a_worker_killed_mid_sweep(scene, tmp_path):
              "--grid", "material.youngs_modulus=" + ",".join(str(40e3 + 2e3 * i) for i in range(n)),
              "--batch-size", "1", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         deadline = time.monotonic() + 60
-        while len(list((out / "results.parquet").glob("part-*"))) < 2 and time.monotonic() < deadline:
+        while _count_parts(out) < 2 and time.monotonic() < deadline:
             time.sleep(0.02)
         workers[0].kill()
+        written_at_kill = _count_parts(out)
         stdout, stderr = driver.communicate(timeout=120)
     assert driver.returncode == 0, stderr
+    assert 2 <= written_at_kill < n, "the worker was not killed mid-sweep"
     rows = _rows(out)
     assert len(list((out / "results.parquet").glob("part-*"))) == n
     assert sorted(r["case"] for r in rows) == list(range(n))
