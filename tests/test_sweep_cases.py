@@ -128,7 +128,7 @@ def test_cases_that_share_a_structure_share_one_compiled_model(scene):
     from sorofem.sweeps import _solve
 
     assert len(_solve._CACHE) == 1
-    kept = next(iter(_solve._CACHE.values()))
+    kept = next(iter(_solve._CACHE.values())).scene
     # Each case equals its scene built and solved from scratch, bit for bit.
     for (e, alpha), outcome in zip(rows, outcomes):
         text = SCENE.replace("youngs_modulus = 66e3", f"youngs_modulus = {e!r}").replace(

@@ -70,30 +70,33 @@ class Key:
         except SceneError as exc:
             raise InputError(f"{self.text} ({where}): {exc.message}") from None
 
-    def apply(self, data: dict[str, Any], value: Any, where: str) -> None:
-        """Set the value in a scene's tables (as :func:`tomllib.loads` returns them)."""
-        node: Any = data
+    def apply(self, data: dict[str, Any], value: Any, where: str) -> dict[str, Any]:
+        """A scene's tables (as :func:`tomllib.loads` returns them) with the value set: the
+        tables and arrays on the key's path are copies, the rest is shared with ``data``."""
+        out = dict(data)
+        node: Any = out
         for depth, (name, index) in enumerate(self.parts):
             last = depth == len(self.parts) - 1
             if index is None:
                 if last:
                     node[name] = copy.deepcopy(value)
-                else:
-                    node = node.setdefault(name, {})
-                    if not isinstance(node, dict):
-                        raise InputError(f"{where}: {self.text}: '{name}' in the scene is not a table")
+                    break
+                child = node.get(name, {})
+                if not isinstance(child, dict):
+                    raise InputError(f"{where}: {self.text}: '{self._header(depth)}' in the scene is not a table")
+                node[name] = node = dict(child)
                 continue
             entries = node.get(name, [])
-            if not isinstance(entries, list) or index >= len(entries):
-                count = len(entries) if isinstance(entries, list) else 0
+            count = len(entries) if isinstance(entries, list) else 0
+            if index >= count:
                 raise InputError(
                     f"{where}: {self.text}: the scene has {count} [[{self._header(depth)}]] entr"
                     f"{'y' if count == 1 else 'ies'} (indices 0..{count - 1}), not {index}"
                     if count else f"{where}: {self.text}: the scene has no [[{self._header(depth)}]] entry"
                 )
-            node = entries[index]
-            if last:
-                entries[index] = copy.deepcopy(value)
+            node[name] = entries = list(entries)
+            entries[index] = node = dict(entries[index])
+        return out
 
     def _header(self, depth: int) -> str:
         return ".".join(name for name, _ in self.parts[: depth + 1])

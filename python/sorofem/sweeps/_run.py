@@ -9,7 +9,6 @@ cases that have no row yet.
 from __future__ import annotations
 
 import contextlib
-import copy
 import hashlib
 import json
 import logging
@@ -153,9 +152,9 @@ def _check_cases(path: Path, text: str, base: dict[str, Any], cases: Cases) -> t
                     raise InputError(f"mesh.file: mesh file not found: {file} (a value of the sweep)")
     first = None
     for members in groups.values():
-        data = copy.deepcopy(base)
+        data = base
         for key, value in zip(cases.keys, cases.row(members[0])):
-            key.apply(data, value, f"case {members[0]}")
+            data = key.apply(data, value, f"case {members[0]}")
         if first is None:
             first = Scene.from_data(data, path, text=text)
         else:

@@ -10,7 +10,6 @@ per worker, not once per case).
 
 from __future__ import annotations
 
-import copy
 import math
 import time
 import traceback
@@ -34,7 +33,20 @@ __all__ = ["Batch", "Outcome", "solve_batch", "tip_node", "FIELDS", "clear_cache
 FIELDS = ("displacement",)
 #: Scenes a worker keeps (by structure), least recently used dropped first.
 CACHE_SIZE = 4
-_CACHE: "OrderedDict[tuple[str, str, str], Scene]" = OrderedDict()
+
+
+@dataclass
+class _Kept:
+    """A scene kept by a worker, with what every case of its structure shares: the tip node and
+    where the markers lie (tetrahedron, barycentric weights)."""
+
+    scene: Scene
+    tip: int
+    markers: dict[tuple[tuple[float, float, float], ...], tuple[NDArray[np.int64], NDArray[np.float64]]] = field(
+        default_factory=dict)
+
+
+_CACHE: "OrderedDict[tuple[str, str, str], _Kept]" = OrderedDict()
 
 
 @dataclass(frozen=True)
@@ -80,57 +92,59 @@ def tip_node(scene: Scene) -> int:
     return int(np.argmax(distance))
 
 
-def _scene(batch: Batch, keys: list[Key], values: tuple[Any, ...], base: dict[str, Any]) -> Scene:
+def _scene(batch: Batch, keys: list[Key], values: tuple[Any, ...], base: dict[str, Any]) -> tuple[Scene, _Kept]:
     """The case's scene, built like a kept scene of the same structure when there is one."""
-    data = copy.deepcopy(base)
+    data = base
     for key, value in zip(keys, values):
-        key.apply(data, value, "case")
-    scene = Scene.from_data(data, Path(batch.scene_path), text=batch.scene_text, like=list(_CACHE.values()))
+        data = key.apply(data, value, "case")
+    scene = Scene.from_data(data, Path(batch.scene_path), text=batch.scene_text,
+                            like=[kept.scene for kept in _CACHE.values()])
     entry = (batch.scene_path, batch.scene_text, scene.structure)
     if entry in _CACHE:
         _CACHE.move_to_end(entry)
     else:
-        _CACHE[entry] = scene
+        _CACHE[entry] = _Kept(scene, tip_node(scene))
         while len(_CACHE) > CACHE_SIZE:
             _CACHE.popitem(last=False)
-    return scene
+    return scene, _CACHE[entry]
 
 
-def _positions(batch: Batch, scene: Scene, positions: NDArray[np.float64], row: dict[str, Any]) -> None:
-    tip = tip_node(scene)
-    row["tip.node"] = tip
-    for axis, value in zip("xyz", positions[tip]):
+def _positions(batch: Batch, kept: _Kept, positions: NDArray[np.float64], row: dict[str, Any]) -> None:
+    row["tip.node"] = kept.tip
+    for axis, value in zip("xyz", positions[kept.tip]):
         row[f"tip.{axis}"] = float(value)
     if batch.markers:
-        tets, weights = embed_points(scene.mesh, np.array(batch.markers))
-        at = np.einsum("kj,kjd->kd", weights, positions[scene.mesh.tets[tets]])
+        if batch.markers not in kept.markers:
+            kept.markers[batch.markers] = embed_points(kept.scene.mesh, np.array(batch.markers))
+        tets, weights = kept.markers[batch.markers]
+        at = np.einsum("kj,kjd->kd", weights, positions[kept.scene.mesh.tets[tets]])
         for i, point in enumerate(at):
             for axis, value in zip("xyz", point):
                 row[f"marker[{i}].{axis}"] = float(value)
 
 
-def _solve_case(batch: Batch, scene: Scene, row: dict[str, Any]) -> dict[str, NDArray[np.float64]]:
-    """Solve as ``sorofem run`` does; fills the row, returns the fields to save."""
+def _solve_case(batch: Batch, scene: Scene, kept: _Kept, row: dict[str, Any]) -> dict[str, NDArray[np.float64]]:
+    """Solve as ``sorofem run`` does; fills the row (the values of ``summary.json`` it names),
+    returns the fields to save."""
     start = time.perf_counter()
     if scene.dynamics is None:
         result = scene.solve()
         row["time"] = time.perf_counter() - start
-        summary = result.to_dict()
-        positions, tensions = result.positions, result.cable_tensions
-        displacement = result.displacement
+        row["newton_iterations"] = result.report.iterations
+        row["residual_norm"] = result.report.residual_norm
+        row["max_displacement"] = result.max_displacement
+        positions, tensions, displacement = result.positions, result.cable_tensions, result.displacement
     else:
         trajectory = scene.simulate(progress=False)
         row["time"] = time.perf_counter() - start
         summary = trajectory.to_dict()
+        for name in ("newton_iterations", "max_displacement", "steps", "cutbacks", "final_time",
+                     "final_kinetic_energy"):
+            row[name] = summary[name]
         positions, tensions = trajectory.final_positions, trajectory.cable_tensions(-1)
         displacement = trajectory.displacement[-1]
-        for name in ("steps", "cutbacks", "final_time", "final_kinetic_energy"):
-            row[name] = summary[name]
     row["converged"] = True
-    row["newton_iterations"] = int(summary["newton_iterations"])
-    row["residual_norm"] = summary.get("residual_norm")
-    row["max_displacement"] = float(summary["max_displacement"])
-    _positions(batch, scene, positions, row)
+    _positions(batch, kept, positions, row)
     for c, t in enumerate(tensions):
         row[f"cable[{c}].max_tension"] = float(np.max(t, initial=0.0))
         row[f"cable[{c}].tensions"] = [float(v) for v in t]
@@ -171,8 +185,8 @@ def solve_batch(batch: Batch) -> list[Outcome]:
             row: dict[str, Any] = {"case": case, "error": None}
             fields: dict[str, NDArray[np.float64]] = {}
             try:
-                scene = _scene(batch, keys, values, base)
-                fields = _solve_case(batch, scene, row)
+                scene, kept = _scene(batch, keys, values, base)
+                fields = _solve_case(batch, scene, kept, row)
             except Exception as exc:  # noqa: BLE001 - every failure of one case is its row, never a lost sweep
                 _failure(row, exc)
             out.append(Outcome(case, row, fields))

@@ -56,13 +56,12 @@ def _temporary(path: Path) -> Path:
 
 
 def write_atomic(path: Path, data: bytes) -> None:
-    """Write ``data`` to a temporary file beside ``path`` and rename it into place."""
+    """Write ``data`` to a temporary file beside ``path`` and rename it into place: a process
+    killed at any moment leaves the whole file or none (no fsync: a power cut may still cost the
+    last files, which :meth:`Store.done` then finds unreadable and drops)."""
     tmp = _temporary(path)
     try:
-        with open(tmp, "wb") as stream:
-            stream.write(data)
-            stream.flush()
-            os.fsync(stream.fileno())
+        tmp.write_bytes(data)
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)
@@ -165,10 +164,14 @@ class Store:
         return sorted(self.results.glob("part-*.parquet")) if self.results.is_dir() else []
 
     def done(self) -> set[int]:
-        """The cases that have a row."""
+        """The cases that have a row. A part file that cannot be read (cut short by a power
+        cut) is removed: its cases are solved again."""
         out: set[int] = set()
         for part in self.parts():
-            out.update(self.pq.read_table(part, columns=["case"]).column("case").to_pylist())
+            try:
+                out.update(self.pq.read_table(part, columns=["case"]).column("case").to_pylist())
+            except (OSError, self.pa.ArrowInvalid):
+                part.unlink()
         return out
 
     def failed(self) -> int:
