@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .._version import __version__
-from ..errors import InputError
+from ..errors import InputError, SceneError
 from ..progress import Progress
 from ..scene import SCENE, Checker, Scene
 from ..targets import embed_points
@@ -155,10 +155,14 @@ def _check_cases(path: Path, text: str, base: dict[str, Any], cases: Cases) -> t
         data = base
         for key, value in zip(cases.keys, cases.row(members[0])):
             data = key.apply(data, value, f"case {members[0]}")
-        if first is None:
-            first = Scene.from_data(data, path, text=text)
-        else:
-            SCENE.check(Checker(path, text), data, "")
+        try:
+            if first is None:
+                first = Scene.from_data(data, path, text=text)
+            else:
+                SCENE.check(Checker(path, text), data, "")
+        except SceneError as exc:
+            shown = ", ".join(f"{k.text}={json.dumps(v)}" for k, v in zip(cases.keys, cases.row(members[0])))
+            raise InputError(f"case {members[0]} ({shown}): {exc}") from None
     assert first is not None
     return first, {g: members for g, members in enumerate(groups.values())}
 
@@ -345,7 +349,10 @@ def sweep(
             if save:
                 store.create_fields(save, table.n, probe.mesh.n_nodes)
         assert manifest is not None
-        n_threads = max(1, sum(dask.nthreads().values()))
+        n_threads = sum(dask.nthreads().values())
+        if n_threads == 0:
+            say(f"no worker is connected to the scheduler {dask.scheduler.address} yet: the cases wait for one")
+        n_threads = max(n_threads, 1)
         size = batch_size or max(1, min(MAX_BATCH, math.ceil(len(todo) / (BATCHES_PER_WORKER * n_threads))))
         run = len(manifest["runs"])
         manifest["runs"].append({"started": datetime.now(timezone.utc).isoformat(timespec="seconds"),
@@ -398,8 +405,9 @@ def _execute(dask: Any, store: Store, table: Cases, path: Path, text: str, batch
     try:
         with _interruptible() as stop:
             for b, members in enumerate(batches):
-                batch = Batch(str(path), text, keys, tuple((i, table.row(i)) for i in members), marker_points, save,
-                              n_cables)
+                # An absolute path: a worker of another process (or machine) has its own working folder.
+                batch = Batch(str(path.resolve()), text, keys, tuple((i, table.row(i)) for i in members),
+                              marker_points, save, n_cables)
                 futures[dask.submit(solve_batch, batch, pure=False)] = (b, members)
             finished = as_completed(list(futures), loop=dask.loop)
             while not finished.is_empty():
