@@ -140,6 +140,8 @@ def sweep_throughput(text: str, n: int, lo: float, hi: float) -> Row:
         overhead_seconds=(row["seconds_1"] - loop) / n, solve_seconds=row["solve_seconds_2"],
         worker_seconds_per_case=loop / n, cluster_start_seconds=row["cluster_start_2"],
         converged=True, iterations=None, seconds=row["seconds_2"], load=[load_start, os.getloadavg()[0]],
+        note=f"measured {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; load average (1 min) "
+             f"{load_start:.2f} at start, {os.getloadavg()[0]:.2f} at end (2 cores)",
     )
     return row
 

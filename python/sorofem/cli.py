@@ -42,7 +42,7 @@ An estimate that does not converge, or a control target that is not reachable, e
 
 ``sweep`` solves many variants of a scene, overriding keys by their dotted names, on a Dask
 cluster, one row per case in ``DIR/results.parquet`` (:mod:`sorofem.sweeps.cli`; needs
-``sorofem[cluster]``).
+the extra ``cluster``).
 
 ``schema`` prints the JSON Schema of scene files (:func:`sorofem.scene.json_schema`), or
 writes it to ``--out FILE``; it never overwrites an existing file unless ``--force`` is given.
@@ -154,7 +154,7 @@ def _build_parser() -> argparse.ArgumentParser:
     schema.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
 
     sweep_cli.add_arguments(sub.add_parser("sweep", help="solve many variants of a scene on a Dask cluster "
-                                           "(needs sorofem[cluster])"))
+                                           "(needs the extra cluster)"))
     return parser
 
 

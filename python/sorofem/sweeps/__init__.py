@@ -3,7 +3,7 @@ studies, datasets of actuation -> shape), resumable and fault tolerant.
 
 A sweep is a scene and a table of cases, each overriding scene keys by their dotted names; each
 case is what ``sorofem run`` computes for its scene, collected as one row of
-``DIR/results.parquet``. Needs the optional packages of ``sorofem[cluster]`` (Dask distributed,
+``DIR/results.parquet``. Needs the optional packages of the extra ``cluster`` (Dask distributed,
 pyarrow, zarr). See ``docs/sweep.md`` for the folder, the columns and running on a cluster.
 
 Examples

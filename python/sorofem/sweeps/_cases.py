@@ -32,7 +32,7 @@ import numpy as np
 from ..errors import InputError, SceneError
 from ..scene import PER_SOLVE_CABLE_KEYS, SCENE, Checker, Field
 
-__all__ = ["Key", "Cases", "parse_key", "parse_values", "read_scene"]
+__all__ = ["Key", "Cases", "parse_key", "parse_values", "read_scene", "missing_extra"]
 
 _PART = re.compile(r"^([A-Za-z_][A-Za-z0-9_\-]*)(?:\[(\d+)\])?$")
 #: Scene tables a sweep may not override: ``sorofem run`` does not read them.
@@ -153,6 +153,12 @@ def parse_key(text: str, where: str = "key") -> Key:
     if index is not None:
         raise InputError(f"{where}: {text}: a whole [[{parts[-1][0]}]] entry is not an override; name one of its keys")
     return Key(text, tuple(parts), Field(spec, field.doc, field.units) if index is not None else field)
+
+
+def missing_extra(what: str, exc: ImportError) -> InputError:
+    """The error for a missing optional package of the ``cluster`` extra."""
+    return InputError(f"{what} needs the optional packages of the extra 'cluster' ({exc.name} is not installed): "
+                      "pip install \".[cluster]\" in a sorofem checkout, or pip install \"dask[distributed]\" pyarrow zarr")
 
 
 def _is_table(spec: Any) -> bool:
@@ -397,6 +403,6 @@ def _read_table(path: Path) -> dict[str, list[Any]]:
         try:
             import pyarrow.parquet as pq
         except ImportError as exc:
-            raise InputError(f"cases: reading {path} needs pyarrow (pip install 'sorofem[cluster]')") from exc
+            raise missing_extra(f"cases: reading {path}", exc) from None
         return pq.read_table(path).to_pydict()
     raise InputError(f"cases: expected a .csv or .parquet file, got {path}")

@@ -18,6 +18,7 @@ first and its part file last: the part file is what marks its cases done, and a 
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import shutil
@@ -28,18 +29,13 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from ..errors import InputError
+from ._cases import missing_extra
 
 __all__ = ["Store", "load_sweep", "load_fields", "MANIFEST", "RESULTS", "CASES", "FIELDS_STORE",
            "missing_extra"]
 
 MANIFEST, CASES, RESULTS, FIELDS_STORE = "sweep.json", "cases.parquet", "results.parquet", "fields.zarr"
 _OWNED = (MANIFEST, CASES, RESULTS, FIELDS_STORE)
-
-
-def missing_extra(what: str, exc: ImportError) -> InputError:
-    """The error for a missing optional package of the ``cluster`` extra."""
-    return InputError(f"{what} needs the optional packages of sorofem[cluster] ({exc.name} is not installed): "
-                      "pip install 'sorofem[cluster]'")
 
 
 def _arrow() -> tuple[Any, Any]:
@@ -267,15 +263,12 @@ def load_sweep(path: str | os.PathLike[str], *, pandas: bool | None = None) -> A
         table = pa.concat_tables([pq.read_table(p) for p in parts]).sort_by("case")
     else:
         table = pq.read_schema(root / RESULTS / "_common_metadata").empty_table()
-    if pandas is False:
+    if pandas is False or (pandas is None and importlib.util.find_spec("pandas") is None):
         return table
     try:
-        import pandas as pd  # noqa: F401
+        frame = table.to_pandas()  # pyarrow imports pandas (not a dependency: installed or not)
     except ImportError as exc:
-        if pandas:
-            raise missing_extra("load_sweep(pandas=True)", exc) from None
-        return table
-    frame = table.to_pandas()
+        raise InputError(f"load_sweep(pandas=True): pandas is not installed ({exc}); pip install pandas") from None
     frame.attrs["sweep"] = json.loads((root / MANIFEST).read_text(encoding="utf-8"))
     return frame
 
