@@ -164,8 +164,9 @@ def estimate(
         :class:`~sorofem.solver.SolveOptions`, which replaces them when given.
     client
         A ``dask.distributed.Client``: with more than one start, the starts run on its
-        workers side by side (each an independent fit, as without a client: the same
-        optimum, bit for bit); the final evaluation runs here. ``verbose`` lines are not
+        workers side by side, each an independent fit as without a client (the same path
+        and optimum of every start; the body travels without its compiled model, which
+        each worker builds); the final evaluation runs here. ``verbose`` lines are not
         printed for remote starts; the history file is written here as starts finish.
     max_evaluations
         Budget of objective evaluations per start (each is one solve per scenario).
