@@ -19,7 +19,7 @@ from typing import Iterator
 import numpy as np
 import pytest
 
-pytest.importorskip("distributed", reason="sweeps need the cluster extra: pip install ".[cluster]"")
+pytest.importorskip("distributed", reason='sweeps need the cluster extra: pip install ".[cluster]"')
 pytest.importorskip("pyarrow")
 pytest.importorskip("zarr")
 

@@ -9,7 +9,7 @@ import pickle
 import numpy as np
 import pytest
 
-pytest.importorskip("distributed", reason="needs the cluster extra: pip install ".[cluster]"")
+pytest.importorskip("distributed", reason='needs the cluster extra: pip install ".[cluster]"')
 
 import sorofem as sf  # noqa: E402
 
