@@ -79,7 +79,7 @@ def test_slider_resolves_warm_started_and_moves_the_surface(server) -> None:
 
     # Same as a direct warm-started solve at that actuation.
     body = rebuild_body(view.body, "standard")
-    reference = sf.solve_static(body, scene.gravity, **scene.solver)
+    reference = sf.solve_static(body, scene.gravity, options=scene.solve_options)
     np.testing.assert_allclose(view.result.positions, reference.positions, atol=1e-7)
 
 
