@@ -410,9 +410,10 @@ def test_mesh_transformed_checks_its_axes():
     assert mesh.transformed(("+x", "y", "z")).points.tolist() == mesh.points.tolist()
 
 
-SOFT_BEAM_SCENE = """\
-# A slender soft beam under its weight: too far from the rest shape for 8 Newton iterations in
-# one load step; 7 halvings of the step are needed.
+def soft_beam_scene(max_cutbacks: object) -> str:
+    """A slender soft beam under its weight: too far from the rest shape for 8 Newton iterations
+    in one load step; 7 halvings of the step are needed."""
+    return f"""\
 [mesh]
 box = {{ size = [0.4, 0.05, 0.05], cells = [16, 2, 2] }}
 
@@ -434,10 +435,10 @@ max_cutbacks = {max_cutbacks}
 
 
 def test_solver_max_cutbacks_limits_the_halvings_of_a_load_step(tmp_path):
-    solved = sf.Scene.load(write(tmp_path, SOFT_BEAM_SCENE.format(max_cutbacks=8))).solve()
+    solved = sf.Scene.load(write(tmp_path, soft_beam_scene(8))).solve()
     assert solved.report.converged and solved.report.cutbacks == 7
     for limit in (0, 6):
-        scene = sf.Scene.load(write(tmp_path, SOFT_BEAM_SCENE.format(max_cutbacks=limit)))
+        scene = sf.Scene.load(write(tmp_path, soft_beam_scene(limit)))
         assert scene.solve_options.max_cutbacks == limit
         with pytest.raises(sf.errors.ConvergenceError, match=f"after {limit} cut-backs"):
             scene.solve()
@@ -445,6 +446,6 @@ def test_solver_max_cutbacks_limits_the_halvings_of_a_load_step(tmp_path):
 
 def test_solver_max_cutbacks_must_be_a_non_negative_integer(tmp_path):
     for bad in ("-1", "1.5", "true"):
-        path = write(tmp_path, SOFT_BEAM_SCENE.format(max_cutbacks=bad))
+        path = write(tmp_path, soft_beam_scene(bad))
         with pytest.raises(sf.errors.SceneError, match="max_cutbacks"):
             sf.Scene.load(path)
