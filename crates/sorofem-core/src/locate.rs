@@ -107,7 +107,7 @@ impl<'a> PointLocator<'a> {
     /// `None` when no tet lies within the search radius.
     pub fn locate(&self, p: [f64; 3], search_radius: f64) -> Option<Location> {
         let p = Vector3::from(p);
-        let inside_tolerance = -1e-10;
+        let inside_tolerance = -crate::tolerance::INSIDE_TET;
         let mut best: Option<Location> = None;
         let reach = (search_radius / self.cell).ceil() as isize;
         let center = self.cell_of(&p);
@@ -163,6 +163,28 @@ impl<'a> PointLocator<'a> {
         }
         best
     }
+}
+
+/// Locates each of `points` (m) in `mesh` with one [`PointLocator`]: `None` for a point farther
+/// than `search_radius` (m) from every tet.
+pub fn locate_points(
+    mesh: &TetMesh,
+    points: &[[f64; 3]],
+    search_radius: f64,
+) -> crate::error::Result<Vec<Option<Location>>> {
+    crate::error::check_finite("points", points.as_flattened())?;
+    if !(search_radius >= 0.0 && search_radius.is_finite()) {
+        return Err(crate::error::Error::invalid(
+            "search_radius",
+            "a finite distance >= 0 m",
+            search_radius,
+        ));
+    }
+    let locator = PointLocator::new(mesh);
+    Ok(points
+        .iter()
+        .map(|&p| locator.locate(p, search_radius))
+        .collect())
 }
 
 /// Barycentric coordinates `(u, v, w)` (>= 0, sum 1) of the point of triangle `abc` closest to
