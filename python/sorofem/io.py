@@ -48,18 +48,24 @@ Examples
 
 from __future__ import annotations
 
+import json
+import math
 import os
+import secrets
 from pathlib import Path
-from typing import Mapping, Protocol
+from typing import Any, Mapping, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._formats import CELL_TAG_KEYS, Surface, meshio_read, read_surface, refuse_overwrite
+from ._files import MAX_NAME_BYTES, MAX_PATH_BYTES, append_line, atomic_path, check_path, write_text
+from ._formats import CELL_TAG_KEYS, Surface, meshio_read, meshio_write, read_surface, refuse_overwrite
 from .errors import InputError
 from .mesh import Mesh
 
-__all__ = ["read_mesh", "write_mesh", "write_result", "read_surface", "Surface", "CELL_TAG_KEYS", "meshio_read"]
+__all__ = ["read_mesh", "write_mesh", "write_result", "read_surface", "Surface", "CELL_TAG_KEYS", "meshio_read",
+           "atomic_path", "write_text", "append_line", "check_path", "MAX_NAME_BYTES", "MAX_PATH_BYTES", "json_text",
+           "new_run_id"]
 
 PathLike = str | os.PathLike[str]
 
@@ -130,6 +136,8 @@ def write_result(
     path: PathLike,
     result: ResultLike,
     extra_point_data: Mapping[str, ArrayLike] | None = None,
+    *,
+    run_id: int | None = None,
 ) -> None:
     """Write a result (normally ``.vtu``) for ParaView.
 
@@ -138,14 +146,21 @@ def write_result(
     ``J`` (volume ratio) and ``von_mises`` (Pa). Use ParaView's "Warp By Vector" with
     scale -1 on ``displacement`` to see the rest shape.
 
+    The file is written to a temporary name and renamed over ``path`` (:func:`atomic_path`);
+    ``run_id`` (an integer, as ``sorofem run`` gives each run) marks a ``.vtu`` with the field
+    data ``sorofem_run_id``.
+
     Raises
     ------
     InputError
-        ``path`` is the input mesh file, or ``extra_point_data`` has a wrong length.
+        ``path`` is the input mesh file, ``extra_point_data`` has a wrong length, the format is
+        unknown, or a field is not finite (nothing is written).
+    OutputError
+        The file cannot be written.
     """
     import meshio
 
-    path = Path(path)
+    path = check_path(path, "path")
     mesh = result.mesh
     refuse_overwrite(path, mesh.source)
     point_data: dict[str, np.ndarray] = {"displacement": result.displacement}
@@ -159,7 +174,51 @@ def write_result(
             )
         point_data[str(name)] = arr
     cell_data = {"J": [result.J], "von_mises": [result.von_mises]}
-    meshio.write(
+    for name, values in [("positions", result.positions), *point_data.items(), *((k, v[0]) for k, v in cell_data.items())]:
+        arr = np.asarray(values)
+        if np.issubdtype(arr.dtype, np.number) and not np.all(np.isfinite(arr)):
+            raise InputError(f"result: {name} has non-finite values; refusing to write them to {path}")
+    meshio_write(
         path,
         meshio.Mesh(result.positions, [("tetra", mesh.tets)], point_data=point_data, cell_data=cell_data),
+        run_id=run_id,
     )
+
+
+def jsonable(value: Any) -> Any:
+    """``value`` as plain JSON types (NumPy scalars and arrays converted); a non-finite float,
+    which JSON cannot hold, becomes ``None`` (``null``)."""
+    if isinstance(value, dict):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return jsonable(value.tolist())
+    if isinstance(value, (np.floating, float)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, (np.integer,)):
+        return int(value)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    return value
+
+
+def json_text(value: Any, indent: int | None = 2) -> str:
+    """Valid JSON text of ``value`` (:func:`jsonable`: never NaN or Infinity), ending with a
+    newline when indented.
+
+    Examples
+    --------
+    >>> sf.io.json_text({"loss": float("nan"), "n": np.int64(3)}, indent=None)  # doctest: +SKIP
+    '{"loss": null, "n": 3}'
+    """
+    text = json.dumps(jsonable(value), indent=indent, allow_nan=False)
+    return text + "\n" if indent is not None else text
+
+
+def new_run_id() -> int:
+    """A random 48-bit integer that marks the files of one run (``summary.json``'s ``run_id``,
+    the ``sorofem_run_id`` field data of its ``.vtu`` files)."""
+    return secrets.randbits(48)

@@ -24,10 +24,16 @@ from numpy.typing import ArrayLike, NDArray
 
 from ._extension import core
 from ._formats import read_volume, refuse_overwrite, write_volume
-from ._validate import as_finite, as_float_array, describe, positive_scalar
+from ._validate import MAX_INDEX, MESH_SIZE, as_finite, as_float_array, check_memory, count, describe, positive_scalar
 from .errors import InputError, MeshError, ParameterError, ShapeError
 
 __all__ = ["Mesh", "ORIENTATIONS"]
+
+#: Bytes a mesh holds per node and per tetrahedron while it is built (the extension's arrays,
+#: NumPy's copy and the checked copy): the estimate :meth:`Mesh.box` checks against the
+#: machine's memory before it allocates anything.
+MESH_BYTES_PER_NODE = 3 * 24
+MESH_BYTES_PER_TET = 3 * 32
 
 #: What :class:`Mesh` does with inverted tetrahedra: swap two nodes, or raise.
 ORIENTATIONS: tuple[str, ...] = ("reorient", "reject")
@@ -81,6 +87,13 @@ class Mesh:
         if not np.all(np.isfinite(pts)):
             row = int(np.argwhere(~np.isfinite(pts))[0, 0])
             raise MeshError(f"points: expected finite coordinates, got {pts[row].tolist()} at node {row}")
+        diagonal = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0))) if len(pts) else 0.0
+        if not MESH_SIZE[0] <= diagonal <= MESH_SIZE[1]:
+            raise MeshError(
+                f"points: the mesh's size (bounding-box diagonal) is {diagonal:g} m; expected from {MESH_SIZE[0]:g} "
+                f"to {MESH_SIZE[1]:g} m (a documented limit: beyond it volumes and stiffnesses leave the range of "
+                "float64; check the units, e.g. a scale of 1e-3 for millimetres)"
+            )
         if tet_arr.min() < 0 or tet_arr.max() >= len(pts):
             bad = int(np.argwhere((tet_arr < 0) | (tet_arr >= len(pts)))[0, 0])
             raise MeshError(
@@ -125,11 +138,15 @@ class Mesh:
         size_arr = as_finite(size, "size", (3,))
         if np.any(size_arr <= 0):
             raise ParameterError(f"size: expected three positive lengths, got {size_arr.tolist()}", "size")
-        cells_arr = np.asarray(cells)
-        if cells_arr.shape != (3,) or not np.issubdtype(cells_arr.dtype, np.integer) or np.any(cells_arr < 1):
-            raise ParameterError(f"cells: expected three integers >= 1, got {describe(cells_arr)}", "cells")
+        values = cells.tolist() if isinstance(cells, np.ndarray) else cells
+        if not isinstance(values, (list, tuple)) or len(values) != 3:
+            raise ParameterError(f"cells: expected three integers from 1 to {MAX_INDEX}, got {describe(cells)}", "cells")
+        nx, ny, nz = cells_list = [count(c, "cells", 1, MAX_INDEX) for c in values]
+        n_nodes, n_tets = (nx + 1) * (ny + 1) * (nz + 1), 6 * nx * ny * nz
+        check_memory(MESH_BYTES_PER_NODE * n_nodes + MESH_BYTES_PER_TET * n_tets,
+                     f"a box of {nx} x {ny} x {nz} cells ({n_tets:.3g} tetrahedra)", "cells")
         origin_arr = as_finite(origin, "origin", (3,))
-        points, tets = core().box_mesh(size_arr, cells_arr.astype(np.int64), origin_arr)
+        points, tets = core().box_mesh(size_arr, np.array(cells_list, dtype=np.int64), origin_arr)
         return cls(points, tets)
 
     @classmethod
@@ -161,7 +178,7 @@ class Mesh:
         points, tets, tags = read_volume(path)
         try:
             mesh = cls(points * float(scale), tets)
-        except MeshError as exc:
+        except InputError as exc:
             raise MeshError(f"{path}: {exc}") from None
         mesh.source = path
         if tags is not None:

@@ -21,7 +21,7 @@ import warnings
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any
 
-from ._validate import Range, positive_int, positive_scalar
+from ._validate import MAX_LOAD_STEPS, MAX_NEWTON_ITERATIONS, Range, positive_int, positive_scalar
 
 __all__ = ["SolveOptions", "SolveReport", "MERITS"]
 
@@ -30,9 +30,10 @@ __all__ = ["SolveOptions", "SolveReport", "MERITS"]
 MERITS: dict[str, str] = {"standard": "energy", "mixed": "residual"}
 
 
-def _option(default: Any, doc: str, valid: Range, integer: bool = False) -> Any:
-    """A field of :class:`SolveOptions` with what the scene's ``[solver]`` table shows of it."""
-    return field(default=default, metadata={"doc": doc, "range": valid, "integer": integer})
+def _option(default: Any, doc: str, valid: Range, integer: bool = False, maximum: int | None = None) -> Any:
+    """A field of :class:`SolveOptions` with what the scene's ``[solver]`` table shows of it
+    (``maximum``: the documented limit of an integer option)."""
+    return field(default=default, metadata={"doc": doc, "range": valid, "integer": integer, "maximum": maximum})
 
 
 @dataclass(frozen=True)
@@ -44,9 +45,10 @@ class SolveOptions:
     tolerance
         Relative residual norm (residual over load norm) at which Newton stops, > 0.
     max_iterations
-        Newton iterations allowed per load step, >= 1.
+        Newton iterations allowed per load step, from 1 to 10000 (a documented limit).
     load_steps
-        Equal load increments, >= 1 (the solver may cut a step back).
+        Equal load increments, from 1 to 10000 (a documented limit; the solver may cut a step
+        back).
 
     Raises
     ------
@@ -57,15 +59,20 @@ class SolveOptions:
     tolerance: float = _option(
         1e-8, "Newton stops when the residual norm over the load norm is below this", Range(gt=0)
     )
-    max_iterations: int = _option(50, "Newton iterations per load step", Range(ge=1), integer=True)
+    max_iterations: int = _option(50, "Newton iterations per load step", Range(ge=1), integer=True,
+                                  maximum=MAX_NEWTON_ITERATIONS)
     load_steps: int = _option(
-        1, "equal load increments (the solver may cut a step back)", Range(ge=1), integer=True
+        1, "equal load increments (the solver may cut a step back)", Range(ge=1), integer=True, maximum=MAX_LOAD_STEPS
     )
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            check = positive_int if f.metadata["integer"] else positive_scalar
-            object.__setattr__(self, f.name, check(getattr(self, f.name), f.name))
+            value = getattr(self, f.name)
+            if f.metadata["integer"]:
+                checked: Any = positive_int(value, f.name, f.metadata["maximum"])
+            else:
+                checked = positive_scalar(value, f.name)
+            object.__setattr__(self, f.name, checked)
 
     def replace(self, **changes: Any) -> "SolveOptions":
         """A copy with some options changed (checked again)."""

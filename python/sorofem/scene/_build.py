@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from .._files import check_path
 from ..body import Body
 from ..cables import Cable
 from ..dynamics import Keyframes
@@ -28,8 +29,7 @@ __all__ = ["build_mesh", "build_material", "apply_fixed", "apply_loads", "apply_
 def build_mesh(check: Checker, table: dict[str, Any], base: Path) -> Mesh:
     scale = table["scale"]
     if "file" in table:
-        name = table["file"]
-        file = Path(name) if Path(name).is_absolute() else base / name
+        file = _file(check, table["file"], "mesh.file", base)
         if not file.is_file():
             raise check.error("mesh.file", f"mesh file not found: {file}")
         try:
@@ -46,6 +46,21 @@ def build_mesh(check: Checker, table: dict[str, Any], base: Path) -> Mesh:
         except ParameterError as exc:
             raise check.error("mesh.axes", str(exc).removeprefix("axes: ")) from None
     return mesh
+
+
+def _file(check: Checker, name: str, key: str, base: Path, expand: bool = False) -> Path:
+    """A file named in the scene, relative to the scene's folder (``expand``: ``~`` is the home
+    folder); checked as a path first."""
+    try:
+        file = check_path(name, key)
+    except InputError as exc:
+        raise check.error(key, str(exc).removeprefix(f"{key}: ")) from None
+    file = file.expanduser() if expand else file
+    file = file if file.is_absolute() else base / file
+    try:
+        return check_path(file, key)
+    except InputError as exc:
+        raise check.error(key, str(exc).removeprefix(f"{key}: ")) from None
 
 
 def _box_bounds(check: Checker, box: dict[str, Any], key: str) -> tuple[np.ndarray, np.ndarray]:
@@ -227,8 +242,7 @@ def build_output(check: Checker, table: dict[str, Any], formulation: str, base: 
     if "directory" in out:
         if not out["directory"].strip():
             raise check.error("output.directory", "expected a folder name, got an empty string")
-        folder = Path(out["directory"]).expanduser()
-        out["directory"] = folder if folder.is_absolute() else base / folder
+        out["directory"] = _file(check, out["directory"], "output.directory", base, expand=True)
     else:
         out["directory"] = None
     if out["color_by"] == "pressure" and formulation != "mixed":
@@ -246,8 +260,7 @@ def build_target(check: Checker, table: dict[str, Any], body: Body, base: Path) 
     if "surface" in table:
         for name in ("surface", "rest"):
             if name in table:
-                file = Path(table[name])
-                file = file if file.is_absolute() else base / file
+                file = _file(check, table[name], f"target.{name}", base)
                 if not file.is_file():
                     raise check.error(f"target.{name}", f"surface file not found: {file}")
                 files[name] = file

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from .._files import check_path
 from ..body import Body
 from ..cables import Cable
 from ..dynamics import Trajectory, simulate
@@ -114,7 +115,7 @@ class Scene:
         FileNotFoundError
             The scene file itself does not exist.
         """
-        path = Path(path)
+        path = check_path(path, "scene")
         if not path.is_file():
             raise FileNotFoundError(f"scene file not found: {path}")
         try:
@@ -135,6 +136,10 @@ class Scene:
             raise SceneError(
                 f"invalid TOML: {exc}", path=path, line=int(match.group(1)) if match else None
             ) from None
+        except RecursionError:
+            # tomllib recurses once per nested array or inline table; no scene key nests deeper than 4.
+            raise SceneError("invalid TOML: arrays or inline tables nested too deeply for the parser (a scene "
+                             "nests them at most 4 levels deep)", path=path) from None
         # Structure, types, ranges and allowed values (everything json_schema() says), with
         # defaults filled in; then what needs the mesh and the other files.
         data = SCENE.check(check, raw, "")
