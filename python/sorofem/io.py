@@ -51,7 +51,9 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import secrets
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Mapping, Protocol
 
@@ -65,7 +67,7 @@ from .mesh import Mesh
 
 __all__ = ["read_mesh", "write_mesh", "write_result", "read_surface", "Surface", "CELL_TAG_KEYS", "meshio_read",
            "atomic_path", "write_text", "append_line", "check_path", "MAX_NAME_BYTES", "MAX_PATH_BYTES", "json_text",
-           "new_run_id"]
+           "new_run_id", "RunFolder"]
 
 PathLike = str | os.PathLike[str]
 
@@ -222,3 +224,73 @@ def new_run_id() -> int:
     """A random 48-bit integer that marks the files of one run (``summary.json``'s ``run_id``,
     the ``sorofem_run_id`` field data of its ``.vtu`` files)."""
     return secrets.randbits(48)
+
+
+_FRAME = re.compile(r"frame_\d+\.vtu")
+
+
+class RunFolder:
+    """The output folder of one run of ``sorofem run``, ``estimate`` or ``control``: its run id,
+    the ``summary.json`` that marks it, and what an earlier run left there.
+
+    The rule: a command owns a fixed set of names in its folder (``owned``; for ``run`` the
+    files it writes for static and dynamic scenes). When a run starts, it
+
+    * draws a :attr:`run_id` that every file it writes carries (``summary.json``'s
+      ``run_id``, the ``.vtu`` files' field data ``sorofem_run_id``, ``trajectory.pvd``'s
+      attribute);
+    * writes ``summary.json`` at once with ``"complete": false`` and ``"status": "running"``,
+      so a run killed at any point (even by SIGKILL) leaves a summary that says so;
+    * removes the frames ``frame_NNNNN.vtu`` of an earlier run from the frames folder
+      (``trajectory/``, which is sorofem's own) when it will write frames;
+    * lists the other owned names present that it will not write in ``stale_outputs`` (in
+      ``summary.json``, and a warning on stderr): they are an earlier run's, and are left
+      alone.
+
+    Every file is written to a temporary name and renamed (:func:`atomic_path`);
+    ``summary.json`` is written last, with ``"complete": true`` only once every other output
+    is on the disk.
+    """
+
+    def __init__(self, folder: Path, outputs: Mapping[str, Path], owned: tuple[str, ...], frames: str | None = None) -> None:
+        self.folder = Path(folder)
+        self.outputs = dict(outputs)
+        self.owned = owned
+        self.frames = frames
+        self.run_id = new_run_id()
+        self.started = _now()
+        self.stale: list[str] = []
+
+    def start(self, summary: Mapping[str, Any]) -> None:
+        """Create the folder, find stale outputs, clear old frames, write the first summary."""
+        if self.outputs:
+            self.folder.mkdir(parents=True, exist_ok=True)
+        self.stale = sorted(
+            name for name in self.owned if name not in self.outputs and (self.folder / name).exists()
+        )
+        if self.frames is not None and self.frames in self.outputs and (self.folder / self.frames).is_dir():
+            for old in (self.folder / self.frames).iterdir():
+                if _FRAME.fullmatch(old.name):
+                    old.unlink()
+        self.write_summary(summary, complete=False, status="running")
+
+    def write_summary(self, summary: Mapping[str, Any], *, complete: bool, status: str) -> str:
+        """The summary marked with the run (id, start and end times, ``complete``, ``status``,
+        stale outputs) as JSON text, written to ``summary.json`` if it is an output."""
+        marked = {
+            **summary,
+            "run_id": self.run_id,
+            "started": self.started,
+            "finished": _now() if status != "running" else None,
+            "complete": complete,
+            "status": status,
+            "stale_outputs": self.stale,
+        }
+        text = json_text(marked)
+        if "summary.json" in self.outputs:
+            write_text(self.outputs["summary.json"], text)
+        return text
+
+
+def _now() -> str:
+    return datetime.now(timezone.utc).isoformat(timespec="seconds")

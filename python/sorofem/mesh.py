@@ -39,6 +39,19 @@ MESH_BYTES_PER_TET = 3 * 32
 ORIENTATIONS: tuple[str, ...] = ("reorient", "reject")
 
 
+def _check_size(extent: NDArray[np.float64], name: str) -> None:
+    """A :class:`MeshError` unless the bounding-box diagonal of ``extent`` (its edge lengths, m)
+    is within the documented :data:`~sorofem._validate.MESH_SIZE`."""
+    top = float(np.max(np.abs(extent)))
+    diagonal = top * float(np.linalg.norm(extent / top)) if top > 0 else 0.0
+    if not MESH_SIZE[0] <= diagonal <= MESH_SIZE[1]:
+        raise MeshError(
+            f"{name}: the mesh's size (bounding-box diagonal) is {diagonal:g} m; expected from {MESH_SIZE[0]:g} "
+            f"to {MESH_SIZE[1]:g} m (a documented limit: beyond it volumes and stiffnesses leave the range of "
+            "float64; check the units, e.g. a scale of 1e-3 for millimetres)"
+        )
+
+
 class Mesh:
     """A linear tetrahedral mesh (rest configuration).
 
@@ -87,13 +100,7 @@ class Mesh:
         if not np.all(np.isfinite(pts)):
             row = int(np.argwhere(~np.isfinite(pts))[0, 0])
             raise MeshError(f"points: expected finite coordinates, got {pts[row].tolist()} at node {row}")
-        diagonal = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0))) if len(pts) else 0.0
-        if not MESH_SIZE[0] <= diagonal <= MESH_SIZE[1]:
-            raise MeshError(
-                f"points: the mesh's size (bounding-box diagonal) is {diagonal:g} m; expected from {MESH_SIZE[0]:g} "
-                f"to {MESH_SIZE[1]:g} m (a documented limit: beyond it volumes and stiffnesses leave the range of "
-                "float64; check the units, e.g. a scale of 1e-3 for millimetres)"
-            )
+        _check_size(pts.max(axis=0) - pts.min(axis=0) if len(pts) else np.zeros(3), "points")
         if tet_arr.min() < 0 or tet_arr.max() >= len(pts):
             bad = int(np.argwhere((tet_arr < 0) | (tet_arr >= len(pts)))[0, 0])
             raise MeshError(
@@ -138,6 +145,7 @@ class Mesh:
         size_arr = as_finite(size, "size", (3,))
         if np.any(size_arr <= 0):
             raise ParameterError(f"size: expected three positive lengths, got {size_arr.tolist()}", "size")
+        _check_size(size_arr, "size")
         values = cells.tolist() if isinstance(cells, np.ndarray) else cells
         if not isinstance(values, (list, tuple)) or len(values) != 3:
             raise ParameterError(f"cells: expected three integers from 1 to {MAX_INDEX}, got {describe(cells)}", "cells")

@@ -9,7 +9,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["GradientResult", "Uncertainty", "FitResult", "ControlResult"]
+__all__ = ["GradientResult", "Uncertainty", "FitResult", "ControlResult", "NOT_IDENTIFIABLE"]
+
+#: What :meth:`Uncertainty.to_dict` (and ``summary.json``) says for a standard deviation the
+#: data do not bound.
+NOT_IDENTIFIABLE = "not identifiable"
 
 
 @dataclass
@@ -77,14 +81,21 @@ class Uncertainty:
     identifiable: dict[str, bool]
 
     def to_dict(self) -> dict[str, Any]:
+        """Plain JSON: a standard deviation the data do not bound (infinite, or undefined) is the
+        string ``"not identifiable"``, an infinite condition number ``"infinite"``; never NaN."""
+
+        def bounded(values: NDArray[np.float64]) -> dict[str, Any]:
+            return {n: float(v) if np.isfinite(v) else NOT_IDENTIFIABLE for n, v in zip(self.names, values)}
+
         return {
-            "sigma": self.sigma,
-            "std": dict(zip(self.names, map(float, self.std))),
-            "relative_std": dict(zip(self.names, map(float, self.relative_std))),
-            "correlation": self.correlation.tolist(),
+            "sigma": float(self.sigma) if np.isfinite(self.sigma) else NOT_IDENTIFIABLE,
+            "std": bounded(self.std),
+            "relative_std": bounded(self.relative_std),
+            "correlation": np.nan_to_num(self.correlation, nan=0.0, posinf=0.0, neginf=0.0).tolist(),
             "singular_values": self.singular_values.tolist(),
-            "condition": self.condition,
-            "identifiable": self.identifiable,
+            "condition": float(self.condition) if np.isfinite(self.condition) else "infinite",
+            "identifiable": {n: bool(self.identifiable.get(n, False)) and bool(np.isfinite(s))
+                             for n, s in zip(self.names, self.std)},
         }
 
 

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from .._files import check_path
+from .._validate import MAX_MAGNITUDE
 from ..body import Body
 from ..cables import Cable
 from ..dynamics import Keyframes
@@ -220,6 +221,9 @@ def apply_cables(check: Checker, entries: list[dict[str, Any]], body: Body) -> l
 
 def build_dynamics(check: Checker, table: dict[str, Any], body: Body) -> dict[str, Any]:
     options = dict(table)
+    if not table["dt"] * table["steps"] <= MAX_MAGNITUDE:
+        raise check.error("dynamics.dt", f"the simulated time dt * steps is {table['dt'] * table['steps']:g} s, above "
+                          f"the documented limit {MAX_MAGNITUDE:g} s")
     schedule = table["actuation"]
     if schedule is not None:
         n_cables = len(body.cables)

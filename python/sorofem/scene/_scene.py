@@ -8,7 +8,7 @@ import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -198,7 +198,8 @@ class Scene:
                             options=self.solve_options)
 
     def simulate(
-        self, *, body: Body | None = None, equilibrium: StaticResult | None = None, progress: bool | None = None
+        self, *, body: Body | None = None, equilibrium: StaticResult | None = None, progress: bool | None = None,
+        on_frames: Callable[..., None] | None = None,
     ) -> Trajectory:
         """Run :func:`sorofem.simulate` with the scene's ``[dynamics]`` (from the rest shape,
         or from :meth:`solve`'s equilibrium with ``initial = "static"``).
@@ -212,7 +213,7 @@ class Scene:
         equilibrium
             With ``initial = "static"``: the equilibrium of ``body`` to start from, if already
             solved (default: solved here). Ignored with ``initial = "rest"``.
-        progress
+        progress, on_frames
             See :func:`sorofem.simulate`.
 
         Raises
@@ -231,7 +232,7 @@ class Scene:
             body, d["dt"], d["steps"], actuation=d["actuation"], gravity=self.gravity,
             damping=(d["mass_damping"], d["stiffness_damping"]), initial=initial, save_every=d["save_every"],
             tolerance=self.solve_options.tolerance, max_iterations=self.solve_options.max_iterations,
-            progress=progress,
+            progress=progress, on_frames=on_frames,
         )
 
     def to_dict(self) -> dict[str, Any]:
