@@ -308,10 +308,19 @@ def _run(args: argparse.Namespace) -> int:
         "gravity": scene.gravity.tolist(),
         "solver_options": scene.solve_options.to_dict(),
     }
-    run.start(base)
-    _warn_stale(run)
-    if scene.dynamics is not None:
-        return _run_dynamics(args, scene, run, base)
+    try:
+        run.start(base)
+        _warn_stale(run)
+        if scene.dynamics is not None:
+            return _run_dynamics(args, scene, run, base)
+        return _run_static(args, scene, run, base)
+    except (KeyboardInterrupt, OutputError) as exc:
+        run.stopped(_stop_status(exc))
+        raise
+
+
+def _run_static(args: argparse.Namespace, scene: Any, run: RunFolder, base: dict[str, Any]) -> int:
+    """``run`` for a static scene: result.vtu, cables.vtu, shape.png, convergence.png, summary.json."""
     outputs = run.outputs
     try:
         result = scene.solve()
@@ -338,9 +347,6 @@ def _run(args: argparse.Namespace) -> int:
         what = "did not converge" if isinstance(exc, ConvergenceError) else "failed"
         print(f"error: solver {what}: {_one_line(exc)}{_report_in(outputs)}", file=sys.stderr)
         return EXIT_SOLVER
-    except KeyboardInterrupt as exc:
-        run.write_summary({**base, "converged": None}, complete=False, status=_interrupted(exc))
-        raise
 
     summary = {**base, **result.to_dict()}
     try:
@@ -361,7 +367,6 @@ def _run(args: argparse.Namespace) -> int:
         _unfinished(run, summary, exc)
         raise
     text = run.write_summary(summary, complete=True, status="complete")
-
     if args.json:
         sys.stdout.write(text)
     elif not args.quiet:
@@ -380,18 +385,16 @@ def _run(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _interrupted(exc: BaseException) -> str:
+def _stop_status(exc: BaseException) -> str:
+    if isinstance(exc, OutputError):
+        return f"failed: {exc}"
     return f"interrupted by {getattr(exc, 'signal', 'SIGINT')}"
 
 
 def _unfinished(run: RunFolder, summary: dict[str, Any], exc: BaseException) -> None:
-    """Mark the summary of a run stopped while writing its outputs (best effort: the disk may
-    be full)."""
-    status = f"failed: {exc}" if isinstance(exc, OutputError) else _interrupted(exc)
-    try:
-        run.write_summary(summary, complete=False, status=status)
-    except OutputError:
-        pass
+    """Mark the summary of a run stopped while writing its outputs, with what it has."""
+    run.summary = summary
+    run.stopped(_stop_status(exc))
 
 
 def _warn_stale(run: RunFolder) -> None:
@@ -497,16 +500,23 @@ def _inverse(args: argparse.Namespace) -> int:
         "options": dict(section),
     }
     run = RunFolder(out, outputs, INVERSE_OUTPUT_NAMES)
-    run.start(base)
-    _warn_stale(run)
     try:
-        found = _solve_inverse(command, scene, section, options, history, args)
-    except KeyboardInterrupt as exc:
-        resume = f"; resume with --resume{'' if args.history is None else ' --history ' + str(history)}" if history else ""
-        _unfinished(run, {**base, "converged": None, "history_file": None if history is None else str(history)}, exc)
-        if history is not None:
-            print(f"error: {_interrupted(exc)}: the history so far is in {history}{resume}", file=sys.stderr)
+        run.start({**base, "history_file": None if history is None else str(history)})
+        _warn_stale(run)
+        return _inverse_run(args, scene, section, options, history, run, base)
+    except (KeyboardInterrupt, OutputError) as exc:
+        run.stopped(_stop_status(exc))
+        if history is not None and isinstance(exc, KeyboardInterrupt):
+            again = "" if args.history is None else f" --history {history}"
+            print(f"error: {_stop_status(exc)}: the history so far is in {history}; go on with the same command "
+                  f"and --resume{again}", file=sys.stderr)
         raise
+
+
+def _inverse_run(args: argparse.Namespace, scene: Any, section: dict[str, Any], options: Any, history: Path | None,
+                 run: RunFolder, base: dict[str, Any]) -> int:
+    command, outputs, out = args.command, run.outputs, run.folder
+    found = _solve_inverse(command, scene, section, options, history, args)
     if command == "estimate":
         fit = found
         m = fit.material

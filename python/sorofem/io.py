@@ -227,6 +227,8 @@ def new_run_id() -> int:
 
 
 _FRAME = re.compile(r"frame_\d+\.vtu")
+#: The temporary name atomic_path writes to: .STEM.tmp-XXXXXXXX.SUFFIX
+_TEMPORARY = re.compile(r"\..+\.tmp-[0-9a-f]{8}(\.[^.]+)?")
 
 
 class RunFolder:
@@ -242,7 +244,8 @@ class RunFolder:
     * writes ``summary.json`` at once with ``"complete": false`` and ``"status": "running"``,
       so a run killed at any point (even by SIGKILL) leaves a summary that says so;
     * removes the frames ``frame_NNNNN.vtu`` of an earlier run from the frames folder
-      (``trajectory/``, which is sorofem's own) when it will write frames;
+      (``trajectory/``, which is sorofem's own) when it will write frames, and the hidden
+      temporary files (``.NAME.tmp-XXXXXXXX.SUFFIX``) of owned names that a killed run left;
     * lists the other owned names present that it will not write in ``stale_outputs`` (in
       ``summary.json``, and a warning on stderr): they are an earlier run's, and are left
       alone.
@@ -260,6 +263,9 @@ class RunFolder:
         self.run_id = new_run_id()
         self.started = _now()
         self.stale: list[str] = []
+        #: The last summary written and its status ("running" until the run ends).
+        self.summary: dict[str, Any] = {}
+        self.status = "running"
 
     def start(self, summary: Mapping[str, Any]) -> None:
         """Create the folder, find stale outputs, clear old frames, write the first summary."""
@@ -270,9 +276,17 @@ class RunFolder:
         )
         if self.frames is not None and self.frames in self.outputs and (self.folder / self.frames).is_dir():
             for old in (self.folder / self.frames).iterdir():
-                if _FRAME.fullmatch(old.name):
+                if _FRAME.fullmatch(old.name) or _TEMPORARY.fullmatch(old.name):
+                    old.unlink()
+        if self.folder.is_dir():
+            for old in self.folder.iterdir():
+                # What a killed run (SIGKILL, power loss) left while writing one of these names.
+                if _TEMPORARY.fullmatch(old.name) and old.name.split(".tmp-")[0][1:] in self._stems():
                     old.unlink()
         self.write_summary(summary, complete=False, status="running")
+
+    def _stems(self) -> set[str]:
+        return {Path(name).stem for name in self.owned}
 
     def write_summary(self, summary: Mapping[str, Any], *, complete: bool, status: str) -> str:
         """The summary marked with the run (id, start and end times, ``complete``, ``status``,
@@ -287,9 +301,21 @@ class RunFolder:
             "stale_outputs": self.stale,
         }
         text = json_text(marked)
+        self.summary, self.status = dict(summary), status
         if "summary.json" in self.outputs:
             write_text(self.outputs["summary.json"], text)
         return text
+
+    def stopped(self, status: str) -> None:
+        """Mark a run that stopped before it wrote its final summary (Ctrl-C, SIGTERM, a full
+        disk): the last summary again, with ``"complete": false`` and ``status`` (best effort:
+        a full disk may refuse this too)."""
+        if self.status != "running":
+            return
+        try:
+            self.write_summary(self.summary, complete=False, status=status)
+        except OSError:
+            pass
 
 
 def _now() -> str:

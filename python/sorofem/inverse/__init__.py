@@ -51,7 +51,7 @@ Examples
 from __future__ import annotations
 
 from ._control import control
-from ._estimate import estimate
+from ._estimate import TornHistoryWarning, estimate
 from ._gradient import gradient
 from ._parameters import PARAMETERS, parameter_names
 from ._problem import DEFAULT_TOLERANCE
@@ -68,8 +68,10 @@ __all__ = [
     "FitResult",
     "ControlResult",
     "Uncertainty",
+    "TornHistoryWarning",
 ]
 
 # Documented (and pickled) as members of this package, whichever private module holds them.
-for _public in (gradient, estimate, control, parameter_names, GradientResult, FitResult, ControlResult, Uncertainty):
+for _public in (gradient, estimate, control, parameter_names, GradientResult, FitResult, ControlResult, Uncertainty,
+                TornHistoryWarning):
     _public.__module__ = __name__
