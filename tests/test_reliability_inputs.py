@@ -333,3 +333,14 @@ def test_issue_20_runaway_counts_are_capped_by_the_documented_limits():
     ]:
         with pytest.raises(sf.ParameterError, match=str(int(LIMITS[name].value))):
             call(int(LIMITS[name].value) + 1)
+
+
+def test_the_guarantees_page_lists_every_limit_with_its_value():
+    from sorofem._validate import LIMITS
+
+    page = (Path(__file__).resolve().parent.parent / "docs" / "guarantees.md").read_text()
+    rows = {line.split("|")[1].strip().strip("`"): line.split("|")[2].strip() for line in page.splitlines()
+            if line.startswith("| `")}
+    assert set(rows) >= set(LIMITS)
+    for name, limit in LIMITS.items():
+        assert float(rows[name]) == limit.value, name

@@ -11,8 +11,11 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+import signal
+import threading
+import time
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, Iterator, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -65,19 +68,97 @@ def refuse_overwrite(path: Path, source: Path | None) -> None:
 def meshio_read(path: PathLike, what: str) -> Any:
     """``meshio.read(path)``, with any failure as a :class:`MeshError` naming the file and
     ``what`` it should hold ("mesh", "surface"). meshio prints the error of every reader it
-    tries (for .msh: ANSYS before Gmsh) to stdout, which would corrupt `sorofem info --json`;
-    that text goes into the error message instead."""
+    tries (for .msh: ANSYS before Gmsh) to stdout and stderr, which would corrupt `sorofem info
+    --json` and the one-line error of the command line; that text goes into the error message
+    instead. A read that does not end within :data:`READ_SECONDS` (plus a second per
+    :data:`READ_BYTES_PER_SECOND` bytes) is stopped: some of meshio's readers loop forever on a
+    truncated file."""
     import meshio
 
+    path = Path(path)
+    _check_headers(path)
     tried = io.StringIO()
+    seconds = READ_SECONDS + path.stat().st_size / READ_BYTES_PER_SECOND
     try:
-        with contextlib.redirect_stdout(tried):
-            return meshio.read(path)
+        with contextlib.redirect_stdout(tried), contextlib.redirect_stderr(tried), _deadline(seconds):
+            return meshio.read(path, file_format=_gmsh_format(path))
+    except _ReadTimeout:
+        raise MeshError(
+            f"{path}: meshio did not finish reading the {what} within {seconds:.0f} s; the file is damaged (some "
+            "of meshio's readers loop forever on a truncated file)"
+        ) from None
     except (Exception, SystemExit) as exc:  # meshio raises many types (ReadError, KeyError, ...), even SystemExit
         detail = " ".join(tried.getvalue().split())
         raise MeshError(
             f"{path}: could not read the {what} with meshio: {exc}" + (f" ({detail})" if detail else "")
         ) from None
+
+
+#: A meshio read may take this long, s, plus one second per READ_BYTES_PER_SECOND bytes of the
+#: file, before it is stopped (main thread only: Python runs signal handlers there).
+READ_SECONDS = 10.0
+READ_BYTES_PER_SECOND = 2e6
+
+
+class _ReadTimeout(Exception):
+    pass
+
+
+@contextlib.contextmanager
+def _deadline(seconds: float) -> Iterator[None]:
+    """Raise :class:`_ReadTimeout` in the block after ``seconds`` (SIGALRM; the caller's own
+    alarm handler and timer are put back)."""
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "setitimer"):
+        yield
+        return
+
+    def expire(signum: int, frame: Any) -> None:
+        raise _ReadTimeout()
+
+    handler = signal.signal(signal.SIGALRM, expire)
+    started = time.monotonic()
+    previous, interval = signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, handler)
+        if previous > 0:
+            signal.setitimer(signal.ITIMER_REAL, max(previous - (time.monotonic() - started), 1e-3), interval)
+
+
+def _first_line(path: Path) -> bytes | None:
+    """The first line that is neither blank nor a ``#`` comment (None: there is none)."""
+    with path.open("rb") as fh:
+        for raw in fh:
+            line = raw.strip()
+            if line and not line.startswith(b"#"):
+                return line
+    return None
+
+
+def _check_headers(path: Path) -> None:
+    """Refuse the files on which meshio's readers never return: a TetGen pair with an empty
+    file, a PLY without ``end_header``."""
+    suffix = path.suffix.lower()
+    if suffix in (".node", ".ele"):
+        for file in (path.with_suffix(".node"), path.with_suffix(".ele")):
+            if file.is_file() and _first_line(file) is None:
+                raise MeshError(f"{path}: the TetGen file {file} has no header line")
+    if suffix == ".ply":
+        with path.open("rb") as fh:
+            head = fh.read(1 << 16)
+        if b"end_header" not in head:
+            raise MeshError(f"{path}: not a PLY file (no 'end_header' line)")
+
+
+def _gmsh_format(path: Path) -> str | None:
+    """``"gmsh"`` for a ``.msh`` that is Gmsh's (it starts with ``$MeshFormat``), so that meshio
+    does not try ANSYS's reader first; None otherwise (meshio picks by the suffix)."""
+    if path.suffix.lower() != ".msh":
+        return None
+    line = _first_line(path)
+    return "gmsh" if line is not None and line.startswith(b"$MeshFormat") else None
 
 
 #: meshio formats that write more than the named file (TetGen's .node + .ele, XDMF's .h5): they

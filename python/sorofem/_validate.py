@@ -169,6 +169,18 @@ def shown(value: Any, width: int = 80) -> str:
     return text if len(text) <= width else text[: width - 3] + "..."
 
 
+def _array(value: Any, name: str, what: str) -> NDArray[Any]:
+    """``np.asarray(value)``; ragged nesting, integers beyond 64 bits and other values NumPy
+    cannot hold as a regular array become a :class:`ShapeError` naming ``name``."""
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError, OverflowError):
+        raise ShapeError(f"{name}: expected {what}, got {describe(value)}") from None
+    if arr.dtype == object:
+        raise ShapeError(f"{name}: expected {what}, got {describe(value)}")
+    return arr
+
+
 def as_float_array(value: ArrayLike, name: str, shape: tuple[int | None, ...]) -> NDArray[np.float64]:
     """A C-contiguous float64 array of the given shape (``None``: any length).
 
@@ -179,7 +191,7 @@ def as_float_array(value: ArrayLike, name: str, shape: tuple[int | None, ...]) -
     """
     try:
         arr = np.asarray(value)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:
         raise ShapeError(f"{name}: expected a numeric array, got {describe(value)} ({exc})") from None
     if arr.dtype == object or not (
         np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)
@@ -203,7 +215,7 @@ def as_finite(value: ArrayLike, name: str, shape: tuple[int | None, ...]) -> NDA
 def as_index_array(value: ArrayLike, name: str, n_nodes: int) -> NDArray[np.int64]:
     """Node indices as a 1-D int64 array in ``[0, n_nodes)``; a boolean mask of length
     ``n_nodes`` is accepted too."""
-    arr = np.asarray(value)
+    arr = _array(value, name, "node indices")
     if arr.dtype == np.bool_:
         if arr.shape != (n_nodes,):
             raise ShapeError(f"{name}: a boolean mask must have shape ({n_nodes},), got shape {arr.shape}")
@@ -228,7 +240,7 @@ def as_index_array(value: ArrayLike, name: str, n_nodes: int) -> NDArray[np.int6
 
 def vector_per_node(value: ArrayLike, name: str, k: int) -> NDArray[np.float64]:
     """A ``(3,)`` vector broadcast to ``k`` nodes, or a ``(k, 3)`` array; finite."""
-    arr = np.asarray(value)
+    arr = _array(value, name, "a (3,) vector or a (k, 3) array")
     if arr.ndim == 1:
         vec = as_finite(arr, name, (3,))
         return np.broadcast_to(vec, (k, 3)).copy()

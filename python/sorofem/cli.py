@@ -3,7 +3,7 @@
 Usage::
 
     sorofem run SCENE.toml [--out DIR] [--quiet] [--json]
-    sorofem estimate SCENE.toml [--out DIR] [--quiet] [--json]
+    sorofem estimate SCENE.toml [--out DIR] [--quiet] [--json] [--history FILE] [--resume]
     sorofem control SCENE.toml [--out DIR] [--quiet] [--json]
     sorofem info MESH [--scale S] [--json]
     sorofem convert IN OUT [--scale S] [--quiet]
@@ -12,7 +12,10 @@ Usage::
     sorofem --version
 
 ``run`` writes ``DIR/result.vtu``, ``DIR/summary.json``, ``DIR/shape.png`` and
-``DIR/convergence.png``. It only ever writes those names and never deletes anything.
+``DIR/convergence.png``. It only ever writes those names, each through a temporary file
+renamed over it, and marks them with a run id (:class:`sorofem.io.RunFolder`: ``summary.json``
+says ``"complete": false`` until everything is written; an earlier run's frames in
+``trajectory/`` are removed, its other files reported as ``stale_outputs``).
 ``summary.json`` records, besides the solver report, the volume bookkeeping
 ``volume_change`` ((V_deformed - V_rest) / V_rest) and ``mean_log_j`` (sum V_e ln J_e / V),
 and for ``kind = "mixed"`` the pressure range ``min_pressure``/``max_pressure`` (Pa); the
@@ -46,8 +49,12 @@ line, for VS Code's Even Better TOML or taplo).
 
 Exit codes: 0 success; 2 bad input (scene, mesh or arguments: one ``error: ...`` line on
 stderr); 3 the solver failed (``summary.json`` is still written, unless switched off, with
-``"converged": false`` and the solver report); 1 an unexpected error (a bug: please report
-it with the traceback).
+``"converged": false`` and the solver report); 4 an output could not be written (disk full,
+file-size limit, permission: the message names the file); 130 and 143 stopped by SIGINT
+(Ctrl-C) or SIGTERM (the outputs written are whole, ``summary.json`` says
+``"complete": false``); 1 an unexpected error (a bug: please report it with the traceback).
+``estimate --history FILE`` (default ``DIR/history.jsonl``) records every iterate as it goes,
+and ``--resume`` goes on with an interrupted run.
 
 Examples
 --------

@@ -244,6 +244,8 @@ class PvdWriter:
         rest_cables = [c.points for c in body.cables]
         self._rest_cables = np.vstack(rest_cables) if rest_cables else None
         self._lines = None
+        self._rest_lengths = np.concatenate(
+            [body.attached_rest_lengths(c) for c in range(len(body.cables))]) if rest_cables else None
         if rest_cables:
             offsets = np.cumsum([body.mesh.n_nodes] + [len(p) for p in rest_cables])
             self._lines = np.vstack(
@@ -279,7 +281,9 @@ class PvdWriter:
                 points = np.vstack([x, cable_x])
                 disp = np.vstack([disp, cable_x - self._rest_cables])
                 cells.append(("line", self._lines))
-                cell_j.append(np.full(len(self._lines), np.nan))
+                # A segment's "volume ratio" is its stretch, deformed over rest length.
+                lengths = np.linalg.norm(points[self._lines[:, 1]] - points[self._lines[:, 0]], axis=1)
+                cell_j.append(lengths / self._rest_lengths)
             file = self.frames_dir / f"frame_{f:05d}.vtu"
             meshio_write(file, meshio.Mesh(points, cells, point_data={"displacement": disp}, cell_data={"J": cell_j}),
                          run_id=self.run_id)
@@ -382,7 +386,8 @@ class Trajectory:
 
         Each ``.vtu`` holds the deformed tetrahedra (point data ``displacement``, cell data
         ``J``) and, when the body has cables, the cables as line cells after the tets (their
-        points appended after the nodes). Every file is written to a temporary name and
+        points appended after the nodes; a segment's ``J`` is its stretch, deformed over rest
+        length). Every file is written to a temporary name and
         renamed (:func:`sorofem.io.atomic_path`), the ``.pvd`` last, so it only ever lists
         complete frames. ``run_id`` marks every file (see :class:`PvdWriter`). Returns the
         ``.pvd`` path.

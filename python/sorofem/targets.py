@@ -43,6 +43,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
+from ._validate import describe
 from .errors import InputError, ShapeError
 from .io import Surface, read_surface
 from .mesh import Mesh
@@ -276,7 +277,10 @@ class Target:
     @classmethod
     def nodes(cls, node_ids: ArrayLike, positions: ArrayLike) -> "Target":
         """Goal positions ``(k, 3)`` (m) of mesh nodes ``node_ids`` ``(k,)``."""
-        ids = np.asarray(node_ids)
+        try:
+            ids = np.asarray(node_ids)
+        except (TypeError, ValueError, OverflowError):
+            raise ShapeError(f"node_ids: expected a 1-D integer array, got {describe(node_ids)}") from None
         if ids.ndim != 1 or not np.issubdtype(ids.dtype, np.integer):
             raise ShapeError(f"node_ids: expected a 1-D integer array, got shape {ids.shape} dtype {ids.dtype}")
         pos = _points_array(positions, "positions", len(ids))
@@ -376,7 +380,10 @@ class Target:
 
 
 def _points_array(value: ArrayLike, name: str, k: int | None) -> NDArray[np.float64]:
-    arr = np.asarray(value, dtype=np.float64)
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        raise ShapeError(f"{name}: expected points of shape (k, 3), got {describe(value)}") from None
     if arr.ndim == 1 and arr.size == 3:
         arr = arr.reshape(1, 3)
     if arr.ndim != 2 or arr.shape[1] != 3 or (k is not None and arr.shape[0] != k):

@@ -9,6 +9,7 @@ and their transforms (log, logit) come from the body's material model declaratio
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
@@ -88,8 +89,8 @@ class Parameters:
     ) -> None:
         if isinstance(names, str):
             names = [names]
-        if not names:
-            raise InputError("params: expected at least one parameter name")
+        if not isinstance(names, (list, tuple)) or not names:
+            raise InputError(f"params: expected a list of parameter names, got {describe(names)}")
         model: MaterialModel = body.material.model
         known = parameter_names(model)
         material_names = set(model.estimable())
@@ -344,15 +345,25 @@ class Parameters:
         if bounds is None:
             return lo, hi
         if isinstance(bounds, Mapping):
+            unknown = [k for k in bounds if k not in self.names]
+            if unknown:
+                raise InputError(f"bounds: {unknown} are not parameters being fitted; expected names among {self.names}")
             bounds = [bounds.get(name) for name in self.names]
-        if len(bounds) != len(self.blocks):
-            raise InputError(f"bounds: expected one (lo, hi) per parameter {self.names}, got {len(bounds)}")
+        if not isinstance(bounds, (list, tuple, np.ndarray)) or len(bounds) != len(self.blocks):
+            raise InputError(f"bounds: expected one (lo, hi) per parameter {self.names}, got {describe(bounds)}")
         for b, pair in zip(self.blocks, bounds):
             if pair is None:
                 continue
+            if not isinstance(pair, (list, tuple, np.ndarray)) or len(pair) != 2:
+                raise InputError(f"bounds: expected (lo, hi) for {b.name!r}, got {describe(pair)}")
             a, c = pair
             for value, target in ((a, lo), (c, hi)):
-                if value is None or not b.transform.contains(value):
+                if value is None:
+                    continue
+                if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+                        or math.isnan(float(value)):
+                    raise InputError(f"bounds: expected numbers or None for {b.name!r}, got {describe(value)}")
+                if not b.transform.contains(value):
                     continue
                 target[b.slice] = b.transform.to_s(np.full(b.size, float(value)))
         if np.any(lo > hi):
