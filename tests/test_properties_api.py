@@ -10,6 +10,9 @@ argument's check is reached.
 from __future__ import annotations
 
 import math
+import os
+import tempfile
+from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
@@ -34,6 +37,18 @@ def body(cables: bool = False) -> sf.Body:
 
 
 TARGET = sf.Target.nodes([2, 5], [[0.1, 0, -0.001], [0.1, 0.02, -0.001]])
+
+
+def _in_scratch(call: Callable[[], Any]) -> Any:
+    """``call()`` with a scratch folder as the working directory (relative names land there)."""
+    scratch = Path(tempfile.gettempdir()) / "sorofem-property"
+    scratch.mkdir(exist_ok=True)
+    cwd = os.getcwd()
+    os.chdir(scratch)
+    try:
+        return call()
+    finally:
+        os.chdir(cwd)
 
 
 def finite(value: Any) -> bool:
@@ -104,10 +119,20 @@ CALLS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
     "Target.points": (lambda points, positions: sf.Target.points(points, positions).bind(body().mesh),
                       {"points": [[0.05, 0.01, 0.01]], "positions": [[0.05, 0.01, 0.0]]}),
     "SolveOptions": (lambda **kw: sf.SolveOptions(**kw), {"tolerance": 1e-8, "max_iterations": 50, "load_steps": 1}),
+    "Mesh.transformed": (lambda axes: sf.Mesh.box().transformed(axes), {"axes": ["x", "-z", "y"]}),
+    "Keyframes": (lambda points: sf.dynamics.Keyframes(points), {"points": [[0.0, 1.0], [0.5, 0.8]]}),
+    "Target.surface": (lambda scale, rest_scale: sf.Target.surface(
+        sf.io.Surface(np.array([[0.0, 0, 0], [0.1, 0, 0], [0, 0.02, 0]]), np.array([[0, 1, 2]])), scale,
+        rest_scale=rest_scale).bind(body().mesh), {"scale": 1.0, "rest_scale": None}),
+    "io.write_mesh": (lambda path: _in_scratch(lambda: sf.io.write_mesh(path, sf.Mesh.box())), {"path": "box.tet"}),
+    "Cable": (lambda points, stiffness, actuation, transition: sf.Cable(points, stiffness=stiffness,
+                                                                       actuation=actuation, transition=transition),
+              {"points": [[0, 0.01, 0.01], [0.1, 0.01, 0.01]], "stiffness": 1e3, "actuation": 0.9,
+               "transition": 0.05}),
 }
 
 
-@settings(max_examples=300)
+@settings(max_examples=500)
 @given(name=st.sampled_from(sorted(CALLS)), data=st.data())
 def test_public_functions_answer_hostile_arguments_cleanly(name, data):
     function, valid = CALLS[name]

@@ -145,6 +145,8 @@ def test_issue_20_invalid_arguments_are_rejected(tmp_path):
     surface.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     with pytest.raises(sf.ParameterError, match="scale"):
         sf.Target.surface(surface, scale=-1)
+    with pytest.raises(sf.ParameterError, match="scale"):
+        sf.Target.surface(sf.io.read_surface(surface), scale=-1)  # not only when a file is read
     body = beam()
     target = sf.Target.nodes([9], [[0.1, 0, 0]])
     with pytest.raises(sf.InputError, match="lame_lambda"):
@@ -344,3 +346,13 @@ def test_the_guarantees_page_lists_every_limit_with_its_value():
     assert set(rows) >= set(LIMITS)
     for name, limit in LIMITS.items():
         assert float(rows[name]) == limit.value, name
+
+
+def test_issue_20_a_model_beyond_the_memory_is_refused_before_it_is_built(monkeypatch):
+    from sorofem import _validate
+
+    body = beam()
+    monkeypatch.setattr(_validate, "machine_memory", lambda: 100_000)  # 100 kB: less than 20 nodes need
+    with pytest.raises(sf.ParameterError, match="memory") as info:
+        sf.solve_static(body)
+    assert info.value.parameter == "mesh"

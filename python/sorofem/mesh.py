@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ._extension import core
+from ._files import check_path
 from ._formats import read_volume, refuse_overwrite, write_volume
 from ._validate import MAX_INDEX, MESH_SIZE, as_finite, as_float_array, check_memory, count, describe, positive_scalar
 from .errors import InputError, MeshError, ParameterError, ShapeError
@@ -82,7 +83,7 @@ class Mesh:
     """
 
     def __init__(self, points: ArrayLike, tets: ArrayLike, orientation: str = "reorient") -> None:
-        if orientation not in ORIENTATIONS:
+        if not isinstance(orientation, str) or orientation not in ORIENTATIONS:
             raise InputError(f"orientation: expected one of {ORIENTATIONS}, got {orientation!r}")
         pts = as_float_array(points, "points", (None, 3))
         tet_arr = np.asarray(tets)
@@ -180,7 +181,7 @@ class Mesh:
         --------
         >>> mesh = sf.Mesh.read("box2.tet", scale=1.0)  # doctest: +SKIP
         """
-        path = Path(path)
+        path = check_path(path, "path")
         if isinstance(scale, bool) or not isinstance(scale, numbers.Real) or not (0 < scale < float("inf")):
             raise ParameterError(f"scale: expected a finite positive number, got {scale!r}", "scale")
         points, tets, tags = read_volume(path)
@@ -203,7 +204,7 @@ class Mesh:
         InputError
             ``path`` is the file the mesh was read from (:attr:`source`).
         """
-        path = Path(path)
+        path = check_path(path, "path")
         refuse_overwrite(path, self.source)
         write_volume(path, self._points, self._tets)
 

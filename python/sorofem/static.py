@@ -24,7 +24,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._validate import MAX_MAGNITUDE, as_finite, describe, real
+from ._validate import MAX_LOAD_STEPS, MAX_MAGNITUDE, as_finite, describe, real
 from .body import Body
 from .cables import DEFAULT_ALPHA_STEP, MAX_HALVINGS, Cable, cable_index, check_actuation, placement_counts
 from .errors import ConvergenceError, InputError, ParameterError, SolverError
@@ -440,7 +440,11 @@ def actuate(
         target = check_actuation(alphas, "alphas")
         step = real(max_step, "max_step", minimum=0.0, strict=True)
         start = body.actuations[index]
-        n = max(1, math.ceil(abs(target - start) / step - 1e-12))
+        solves = abs(target - start) / step
+        if not solves <= MAX_LOAD_STEPS:
+            raise ParameterError(f"max_step: reaching alpha = {target:g} from {start:g} in steps of {step:g} takes "
+                                 f"{solves:.3g} solves, more than the documented limit {MAX_LOAD_STEPS}", "max_step")
+        n = max(1, math.ceil(solves - 1e-12))
         path = [start + (target - start) * (i + 1) / n for i in range(n)]
     else:
         try:

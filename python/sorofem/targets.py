@@ -43,7 +43,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
-from ._validate import describe
+from ._validate import describe, positive_scalar
 from .errors import InputError, ShapeError
 from .io import Surface, read_surface
 from .mesh import Mesh
@@ -66,8 +66,11 @@ def _as_surface(value: Any, scale: float, name: str) -> Surface:
     if isinstance(value, (str, os.PathLike)):
         return read_surface(value, scale)
     if isinstance(value, tuple) and len(value) == 2:
-        v = np.asarray(value[0], dtype=np.float64)
-        f = np.asarray(value[1], dtype=np.int64)
+        try:
+            v = np.asarray(value[0], dtype=np.float64)
+            f = np.asarray(value[1], dtype=np.int64)
+        except (TypeError, ValueError, OverflowError):
+            raise ShapeError(f"{name}: expected (vertices (v, 3), faces (f, 3)), got {describe(value)}") from None
         if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3:
             raise ShapeError(f"{name}: expected (vertices (v, 3), faces (f, 3)), got shapes {v.shape}, {f.shape}")
         return Surface(v * float(scale), f)
@@ -107,7 +110,7 @@ def embed_points(mesh: Mesh, points: ArrayLike, outside: str = "error") -> tuple
     """
     from scipy.spatial import cKDTree
 
-    if outside not in ("error", "nearest"):
+    if not isinstance(outside, str) or outside not in ("error", "nearest"):
         raise InputError(f"outside: expected 'error' or 'nearest', got {outside!r}")
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3:
@@ -326,8 +329,10 @@ class Target:
         --------
         >>> t = sf.Target.surface("hammer_target.obj", scale=0.01, rest="hammerbot_fine.obj")  # doctest: +SKIP
         """
-        if match not in ("auto", "vertices", "closest"):
-            raise InputError(f"match: expected 'auto', 'vertices' or 'closest', got {match!r}")
+        if not isinstance(match, str) or match not in ("auto", "vertices", "closest"):
+            raise InputError(f"match: expected 'auto', 'vertices' or 'closest', got {describe(match)}")
+        scale = positive_scalar(scale, "scale")
+        rest_scale = None if rest_scale is None else positive_scalar(rest_scale, "rest_scale")
         goal_surface = _as_surface(goal, scale, "goal")
         rest_surface = None if rest is None else _as_surface(rest, scale if rest_scale is None else rest_scale, "rest")
         return cls("surface", goal=goal_surface, rest=rest_surface, match=match, outside=outside)
