@@ -12,10 +12,13 @@ Usage::
     sorofem --version
 
 ``run`` writes ``DIR/result.vtu``, ``DIR/summary.json``, ``DIR/shape.png`` and
-``DIR/convergence.png``. It only ever writes those names, each through a temporary file
-renamed over it, and marks them with a run id (:class:`sorofem.io.RunFolder`: ``summary.json``
-says ``"complete": false`` until everything is written; an earlier run's frames in
-``trajectory/`` are removed, its other files reported as ``stale_outputs``).
+``DIR/convergence.png`` (and ``DIR/deformed.vtu`` with ``[output] deformed = true``). It only
+ever writes those names, each through a temporary file renamed over it, and marks them with a
+run id (:class:`sorofem.io.RunFolder`: ``summary.json`` says ``"complete": false`` until
+everything is written; an earlier run's frames in ``trajectory/`` are removed, its other files
+reported as ``stale_outputs``). ``result.vtu`` holds the **rest** mesh with the point data
+``displacement`` (the finite-element convention: ParaView's Warp By Vector on it shows the
+deformed body); ``deformed.vtu`` the same data on the deformed mesh.
 ``summary.json`` records, besides the solver report, the volume bookkeeping
 ``volume_change`` ((V_deformed - V_rest) / V_rest) and ``mean_log_j`` (sum V_e ln J_e / V),
 and for ``kind = "mixed"`` the pressure range ``min_pressure``/``max_pressure`` (Pa); the
@@ -38,7 +41,12 @@ write over a file the scene reads (the scene, its mesh, its ``[target]`` surface
 cables that bring ``[target]`` closest (:func:`sorofem.control`). Both use the scene's gravity
 and ``[solver]`` options (the Newton tolerance no looser than 1e-10) and write ``DIR/summary.json`` (estimate: the parameters, the material
 as (mu, lambda) and (E, nu), the residual, forward solves and history; control: actuation,
-distance, reachable, forward solves, history) and ``DIR/result.vtu`` (the final equilibrium).
+distance, reachable, forward solves, history), ``DIR/result.vtu`` (the final equilibrium) and
+``DIR/fit.png`` (goal against model points, misfit history). ``estimate`` prints each parameter
+with its standard error (rounded to it), says which ones ended on a bound (no standard error
+there: the covariance is that of the others, with them held), and, when the fit is poorly
+conditioned, profiles the misfit along the worst determined parameter (``summary.json``
+``profile``, ``DIR/profile.png``).
 An estimate that does not converge, or a control target that is not reachable, exits 3
 (the outputs are still written). They follow ``[output]`` ``directory``, ``summary`` and ``vtu``.
 
@@ -76,6 +84,7 @@ from typing import Any, Iterator, Sequence
 
 import numpy as np
 
+from ._text import plural
 from ._version import __version__
 from .cables import placement_counts, write_cables
 from .convert import run_command as convert_command
@@ -83,7 +92,7 @@ from .dynamics import PvdWriter
 from .errors import ConvergenceError, InputError, Interrupted, OutputError, SolverError
 from .inverse import DEFAULT_TOLERANCE, control, estimate
 from .io import RunFolder, atomic_path, json_text, read_mesh, write_result, write_text
-from .plot import plot_convergence, plot_rest_and_deformed, plot_trajectory
+from .plot import plot_convergence, plot_fit, plot_profile, plot_rest_and_deformed, plot_trajectory
 from .progress import default as progress_default
 from .scene import Scene, schema_text
 from .solver import SolveReport
@@ -100,9 +109,9 @@ CABLE_OUTPUT_NAMES = ("cables.vtu",)
 #: Written instead of OUTPUT_NAMES for a scene with [dynamics] (trajectory/ holds the frames).
 DYNAMICS_OUTPUT_NAMES = ("trajectory.pvd", "trajectory", "summary.json", "trajectory.png")
 #: Every name `run` may write in its folder (sorofem.io.RunFolder: the stale ones are reported).
-RUN_OWNED = tuple(dict.fromkeys(OUTPUT_NAMES + CABLE_OUTPUT_NAMES + DYNAMICS_OUTPUT_NAMES))
+RUN_OWNED = tuple(dict.fromkeys(OUTPUT_NAMES + CABLE_OUTPUT_NAMES + ("deformed.vtu",) + DYNAMICS_OUTPUT_NAMES))
 #: What `estimate` and `control` write (history.jsonl: estimate's, unless --history names another file).
-INVERSE_OUTPUT_NAMES = ("summary.json", "result.vtu", "history.jsonl")
+INVERSE_OUTPUT_NAMES = ("summary.json", "result.vtu", "fit.png", "profile.png", "history.jsonl")
 #: Radius ratio below which a tet counts as bad in `sorofem info` (1 = regular tet).
 BAD_QUALITY = 0.1
 
@@ -118,8 +127,48 @@ class _Parser(argparse.ArgumentParser):
         raise _UsageError(f"{message} (see '{self.prog} --help')")
 
 
+#: The epilog of ``sorofem --help``.
+EPILOG = """\
+examples:
+  sorofem run examples/scenes/cantilever.toml --out results/cantilever
+  sorofem run examples/scenes/dynamics.toml --out results/dynamics       # [dynamics]: a trajectory
+  sorofem estimate examples/scenes/estimate.toml --out results/estimate  # fit [estimate] to [target]
+  sorofem control examples/scenes/control.toml --out results/control     # cable actuations for [target]
+  sorofem info robot.msh --scale 1e-3                                    # mesh statistics and quality
+  sorofem convert robot.msh robot.vtu                                    # see 'sorofem convert --help'
+  sorofem schema --out scene.schema.json                                 # for editors
+
+exit codes:
+  0    success
+  2    bad input: scene, mesh or arguments (one 'error: ...' line on stderr)
+  3    the solver failed, an estimate did not converge or a control target is not reachable
+       (summary.json is still written)
+  4    an output could not be written (disk full, file-size limit, permission)
+  1    unexpected error (a bug: please report it with the traceback)
+  130  interrupted by Ctrl-C (SIGINT), 143 by SIGTERM: summary.json says "complete": false
+
+documentation: docs/cli.md, docs/scene.md and docs/guarantees.md, or 'sorofem COMMAND --help'"""
+
+#: The epilog of ``sorofem convert --help``: what each output suffix writes.
+CONVERT_EPILOG = """\
+output formats (by the suffix of OUT):
+  .tet                 sorofem's text format (full float precision)
+  .msh                 Gmsh 4.1 ASCII
+  .node, .ele          TetGen (both STEM.node and STEM.ele are written)
+  .stl .obj .ply .off  the boundary surface (outward-oriented triangles)
+  .vtu .vtk .mesh ...  any other volume format meshio writes (the tetrahedra)
+
+input formats: .tet, Gmsh .msh (2.2, 4.x), TetGen .node/.ele, and any volume mesh meshio reads
+(.vtu, .vtk, .mesh, ...). A surface (.stl, .obj) is not a volume mesh: fill it with tetrahedra by
+sf.tetrahedralize or a scene's [mesh] surface = "robot.stl".
+
+example:
+  sorofem convert robot_mm.msh robot.vtu --scale 1e-3"""
+
+
 def _build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="sorofem", description="Simulate cable-driven silicone soft robots.")
+    parser = _Parser(prog="sorofem", description="Simulate, calibrate and control cable-driven silicone soft robots.",
+                     epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"sorofem {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
@@ -150,13 +199,15 @@ def _build_parser() -> argparse.ArgumentParser:
     info.add_argument("--scale", type=float, default=1.0, help="coordinate scale factor (default 1)")
     info.add_argument("--json", action="store_true", help="print as JSON")
 
-    convert = sub.add_parser("convert", help="convert a mesh file to another format (see sorofem.convert)")
+    convert = sub.add_parser("convert", help="convert a mesh file to another format (.tet, .msh, .node/.ele, .vtu, "
+                             ".stl, ...)", description="Convert a tetrahedral mesh to the format of OUT's suffix.",
+                             epilog=CONVERT_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     convert.add_argument("input", type=Path, metavar="IN", help="mesh file (.tet or any format meshio reads)")
     convert.add_argument("output", type=Path, metavar="OUT", help="output file; its suffix picks the format")
     convert.add_argument("--scale", type=float, default=1.0, help="coordinate scale factor (default 1)")
     convert.add_argument("--quiet", action="store_true", help="print nothing on success")
 
-    view = sub.add_parser("view", help="interactive 3-D view in the browser (needs sorofem[viewer])")
+    view = sub.add_parser("view", help="interactive 3-D view in the browser (extra 'viewer': pip install \".[viewer]\")")
     view.add_argument("scene", type=Path,
                       help="TOML scene file, or a .pvd / the --out folder of a dynamic run (played back)")
     view.add_argument("--trajectory", action="store_true", help="simulate the scene's [dynamics] and play it")
@@ -270,8 +321,8 @@ def _selected_outputs(scene: Any) -> list[str]:
         names = DYNAMICS_OUTPUT_NAMES
     else:
         wanted = {"result.vtu": "vtu", "summary.json": "summary", "shape.png": "png", "convergence.png": "png",
-                  "cables.vtu": "cables"}
-        names = OUTPUT_NAMES + (CABLE_OUTPUT_NAMES if scene.cables else ())
+                  "cables.vtu": "cables", "deformed.vtu": "deformed"}
+        names = OUTPUT_NAMES + (CABLE_OUTPUT_NAMES if scene.cables else ()) + ("deformed.vtu",)
     return [name for name in names if switches[wanted[name]]]
 
 
@@ -359,6 +410,8 @@ def _run_static(args: argparse.Namespace, scene: Any, run: RunFolder, base: dict
     try:
         if "result.vtu" in outputs:
             write_result(outputs["result.vtu"], result, run_id=run.run_id)
+        if "deformed.vtu" in outputs:
+            write_result(outputs["deformed.vtu"], result, points="deformed", run_id=run.run_id)
         if "cables.vtu" in outputs:
             write_cables(outputs["cables.vtu"], result, run_id=run.run_id)
         if "shape.png" in outputs:
@@ -459,8 +512,9 @@ def _run_dynamics(args: argparse.Namespace, scene: Any, run: RunFolder, base: di
     elif not args.quiet:
         print(f"{scene.path.name}: {scene.mesh.n_nodes} nodes, {scene.mesh.n_tets} tets, {scene.formulation}, "
               f"{len(scene.cables)} cable(s)")
-        print(f"{summary['steps']} steps of {summary['dt']:g} s: {summary['newton_iterations']} Newton iterations "
-              f"(max {summary['max_iterations_per_step']} per step), {summary['cutbacks']} cutbacks, "
+        print(f"{plural(summary['steps'], 'step')} of {summary['dt']:g} s: "
+              f"{plural(summary['newton_iterations'], 'Newton iteration')} "
+              f"(max {summary['max_iterations_per_step']} per step), {plural(summary['cutbacks'], 'cutback')}, "
               f"{summary['timings']['simulate']:.3g} s")
         print(f"final kinetic energy {summary['final_kinetic_energy']:.3e} J (max {summary['max_kinetic_energy']:.3e} J), "
               f"max displacement {summary['max_displacement']:.6g} m")
@@ -483,7 +537,7 @@ def _inverse(args: argparse.Namespace) -> int:
     if section is None:
         raise InputError(f"{scene.path}: '{command}' needs an [{command}] table")
     out, label = _output_folder(args, scene)
-    switches = {"summary.json": scene.output["summary"], "result.vtu": scene.output["vtu"]}
+    switches = {"summary.json": scene.output["summary"], "result.vtu": scene.output["vtu"], "fit.png": scene.output["png"]}
     outputs = {name: out / name for name, on in switches.items() if on}
     history = None
     if command == "estimate":
@@ -510,7 +564,7 @@ def _inverse(args: argparse.Namespace) -> int:
     try:
         run.start({**base, "history_file": None if history is None else str(history)})
         _warn_stale(run)
-        return _inverse_run(args, scene, section, options, history, run, base)
+        return _inverse_run(args, scene, section, options, history, run, base, label)
     except (KeyboardInterrupt, OutputError) as exc:
         run.stopped(_stop_status(exc))
         if history is not None and isinstance(exc, KeyboardInterrupt):
@@ -521,7 +575,7 @@ def _inverse(args: argparse.Namespace) -> int:
 
 
 def _inverse_run(args: argparse.Namespace, scene: Any, section: dict[str, Any], options: Any, history: Path | None,
-                 run: RunFolder, base: dict[str, Any]) -> int:
+                 run: RunFolder, base: dict[str, Any], label: str) -> int:
     command, outputs, out = args.command, run.outputs, run.folder
     found = _solve_inverse(command, scene, section, options, history, args)
     if command == "estimate":
@@ -536,22 +590,16 @@ def _inverse_run(args: argparse.Namespace, scene: Any, section: dict[str, Any], 
             "residual": fit.residual,
             "history": fit.history,
         }
-        ok, result = fit.converged, fit.result
-        forms = "; ".join(
-            ", ".join(f"{m.model.parameter(n).symbol} {_fmt(m.value(n))}" + (f" {m.model.parameter(n).units}"
-                      if m.model.parameter(n).units else "") for n in form.names)
-            for form in m.model.forms
-        )
-        lines = [
-            f"{scene.path.name}: fitted {', '.join(section['params'])} ({section['method']})",
-            forms,
-            f"residual {fit.residual:.3e} m (rms), {fit.forward_solves} forward solves, {fit.message}",
-        ]
+        ok, result, fitted = fit.converged, fit.result, fit
+        lines = [f"{scene.path.name}: {fit.summary()}"]
+        if fit.profile is not None and "fit.png" in outputs:
+            outputs["profile.png"] = out / "profile.png"
+            _refuse_inputs({"profile.png": outputs["profile.png"]}, scene, label)
         failure = f"the fit did not converge: {fit.message}"
     else:
         ctl = found
         summary = {**base, **ctl.to_dict(), "history": ctl.history, "converged": ctl.reachable}
-        ok, result = ctl.reachable, ctl.result
+        ok, result, fitted = ctl.reachable, ctl.result, ctl
         lines = [
             f"{scene.path.name}: actuation {', '.join(f'{a:.6g}' for a in ctl.actuation)} "
             f"of cable(s) {section['cables']} ({section['method']})",
@@ -564,6 +612,10 @@ def _inverse_run(args: argparse.Namespace, scene: Any, section: dict[str, Any], 
     try:
         if result is not None and "result.vtu" in outputs:
             write_result(outputs["result.vtu"], result, run_id=run.run_id)
+        for name, plot in (("fit.png", plot_fit), ("profile.png", plot_profile)):
+            if name in outputs:
+                with atomic_path(outputs[name]) as png:
+                    plot(fitted, png)
     except (KeyboardInterrupt, OutputError) as exc:
         _unfinished(run, summary, exc)
         raise
@@ -591,10 +643,6 @@ def _solve_inverse(command: str, scene: Any, section: dict[str, Any], options: A
         scene.body, scene.target, cables=section["cables"], bounds=section["bounds"], method=section["method"],
         gravity=scene.gravity, options=options,
     )
-
-
-def _fmt(value: Any) -> str:
-    return f"{value:.6g}" if np.ndim(value) == 0 else f"{np.min(value):.6g}..{np.max(value):.6g}"
 
 
 # ---------------------------------------------------------------------------
@@ -647,7 +695,7 @@ def tet_quality(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
 
 def _info(args: argparse.Namespace) -> int:
     mesh = read_mesh(args.mesh, scale=args.scale)
-    lo, hi = mesh.bounds()
+    lo, hi = mesh.bounds
     vol = mesh.volumes
     quality = tet_quality(mesh.points, mesh.tets)
     data = {

@@ -41,6 +41,7 @@ from numpy.typing import ArrayLike, NDArray
 from ._deprecated import moved
 from ._files import write_text
 from ._formats import meshio_write
+from ._text import plural
 from ._validate import (
     MAX_MAGNITUDE,
     MAX_NEWTON_ITERATIONS,
@@ -600,7 +601,7 @@ def _step_postfix(out: Mapping[str, Any], done: int, dt: float) -> str:
 
 
 def _postfix(t: float, per_step: float, cutbacks: int) -> str:
-    return f"t={t:.4g} s, {per_step:.1f} it/step, {cutbacks} cutbacks"
+    return f"t={t:.4g} s, {per_step:.1f} it/step, {plural(cutbacks, 'cutback')}"
 
 
 #: Wall-clock target of one chunk of steps while a progress line is shown, s.

@@ -21,6 +21,7 @@ import warnings
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any
 
+from ._text import plural
 from ._validate import MAX_LOAD_STEPS, MAX_NEWTON_ITERATIONS, Range, positive_int, positive_scalar
 
 __all__ = ["SolveOptions", "SolveReport", "MERITS"]
@@ -192,8 +193,8 @@ class SolveReport:
         """A few human-readable lines."""
         status = "converged" if self.converged else "did NOT converge"
         lines = [
-            f"Newton {status} in {self.iterations} iterations "
-            f"({self.load_steps} load steps, {self.cutbacks} cutbacks), "
+            f"Newton {status} in {plural(self.iterations, 'iteration')} "
+            f"({plural(self.load_steps, 'load step')}, {plural(self.cutbacks, 'cutback')}), "
             f"relative residual {self.residual_norm:.3e}"
         ]
         if self.timings:

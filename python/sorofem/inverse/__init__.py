@@ -50,17 +50,19 @@ Examples
 
 from __future__ import annotations
 
+from ._analysis import PROFILE_CONDITION
 from ._control import control
 from ._estimate import TornHistoryWarning, estimate
 from ._gradient import gradient
 from ._parameters import PARAMETERS, parameter_names
 from ._problem import DEFAULT_TOLERANCE
-from .results import ControlResult, FitResult, GradientResult, Uncertainty
+from .results import ControlResult, FitResult, GradientResult, Profile, Uncertainty
 
 __all__ = [
     "PARAMETERS",
     "parameter_names",
     "DEFAULT_TOLERANCE",
+    "PROFILE_CONDITION",
     "gradient",
     "estimate",
     "control",
@@ -68,10 +70,11 @@ __all__ = [
     "FitResult",
     "ControlResult",
     "Uncertainty",
+    "Profile",
     "TornHistoryWarning",
 ]
 
 # Documented (and pickled) as members of this package, whichever private module holds them.
 for _public in (gradient, estimate, control, parameter_names, GradientResult, FitResult, ControlResult, Uncertainty,
-                TornHistoryWarning):
+                Profile, TornHistoryWarning):
     _public.__module__ = __name__
