@@ -106,11 +106,14 @@ class Uncertainty:
     material_std: dict[str, float] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain JSON: a standard deviation the data do not bound (infinite, or undefined) is the
-        string ``"not identifiable"``, an infinite condition number ``"infinite"``; never NaN."""
+        """Plain data for JSON: a standard deviation the data do not bound (infinite, or undefined)
+        is the string ``"not identifiable"``, an infinite condition number ``"infinite"``; that
+        of a parameter held at a bound stays NaN (``null`` in ``summary.json``; ``at_bound``
+        says which bound)."""
 
         def bounded(values: NDArray[np.float64]) -> dict[str, Any]:
-            return {n: float(v) if np.isfinite(v) else NOT_IDENTIFIABLE for n, v in zip(self.names, values)}
+            return {n: float(v) if np.isfinite(v) or self.at_bound.get(n) else NOT_IDENTIFIABLE
+                    for n, v in zip(self.names, values)}
 
         return {
             "sigma": float(self.sigma) if np.isfinite(self.sigma) else NOT_IDENTIFIABLE,
