@@ -41,7 +41,7 @@ def _option(default: Any, doc: str, valid: Range, integer: bool = False, maximum
 class SolveOptions:
     """Options of Newton's method for a static solve.
 
-    Parameters
+    Attributes
     ----------
     tolerance
         Relative residual norm (residual over load norm) at which Newton stops, > 0.
