@@ -128,6 +128,14 @@ def _fit_from(problem: Problem, p: Parameters, theta_start: Any, method: str, lo
             "newton_iterations": problem.newton_iterations - iterations_before}
 
 
+def _end_record(start: int, run: Mapping[str, Any], p: Parameters) -> dict[str, Any]:
+    """The history line that closes a start (what ``resume`` needs to skip it)."""
+    return {"kind": "end", "start": start,
+            "params": run["history"][-1]["params"] if run["history"] else p.as_dict(p.from_s(run["s"])),
+            "loss": run["loss"], "iterations": run["iterations"], "converged": run["converged"],
+            "message": run["message"], "forward_solves": run["forward_solves"]}
+
+
 def _start_on_worker(k: int, theta_start: Any, setup: tuple[Any, ...]) -> dict[str, Any]:
     """One start of a fit where a Dask worker runs it: the problem is built there again (the
     body travels without its compiled model), exactly as :func:`estimate` builds it."""
@@ -158,6 +166,7 @@ def _remote_starts(client: Any, start_points: list[Any], first_start: int, histo
         if history_file is not None:
             with history_file.open("a", encoding="utf-8") as fh:
                 fh.writelines(json.dumps(entry) + "\n" for entry in run["history"])
+                fh.write(json.dumps(_end_record(first_start + k, run, problem.params)) + "\n")
         bar.set(problem.forward_solves, postfix=f"start {k + 1}/{len(start_points)} done")
         runs.append(run)
     return runs
@@ -386,10 +395,7 @@ def estimate(
                     bar.desc = f"estimate ({method}) start {k + 1}/{len(start_points)}"
                 record = Recorder(problem, verbose, history_file, first_start + k, t0, previous)
                 run = _fit_from(problem, p, theta_start, method, lo, hi, record, max_evaluations, xtol, ftol, previous)
-                record.write({"kind": "end", "start": first_start + k, "params": record.entries[-1]["params"]
-                              if record.entries else p.as_dict(p.from_s(run["s"])), "loss": run["loss"],
-                              "iterations": run["iterations"], "converged": run["converged"],
-                              "message": run["message"], "forward_solves": run["forward_solves"]})
+                record.write(_end_record(first_start + k, run, p))
                 runs.append(run)
         best = min(runs, key=lambda run: run["loss"])
         # Final evaluation at the optimum: residual and the Jacobian for the uncertainty.
