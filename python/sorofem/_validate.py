@@ -22,6 +22,7 @@ __all__ = [
     "Limit",
     "MAX_NEWTON_ITERATIONS",
     "MAX_LOAD_STEPS",
+    "MAX_CUTBACKS",
     "MAX_TIME_STEPS",
     "MAX_CABLE_DIVISIONS",
     "MAX_STARTS",
@@ -62,6 +63,9 @@ class Limit:
 MAX_NEWTON_ITERATIONS = 10_000
 #: Load increments of a static solve (``load_steps``).
 MAX_LOAD_STEPS = 10_000
+#: Halvings of a failed load step (``[solver] max_cutbacks``): 2^-60 of a step is below
+#: float64's resolution of the load factor.
+MAX_CUTBACKS = 60
 #: Time steps of one simulation (``steps``, ``[dynamics] steps``); also bounds ``save_every``.
 MAX_TIME_STEPS = 1_000_000
 #: Segments of a straight cable (``Cable.line(divisions=...)``, ``[[cable]] divisions``).
@@ -86,6 +90,8 @@ LIMITS: dict[str, Limit] = {
         Limit("max_iterations", MAX_NEWTON_ITERATIONS, "Newton iterations per load step; more never converge "
               "where fewer did not"),
         Limit("load_steps", MAX_LOAD_STEPS, "load increments of a static solve (the solver cuts steps back itself)"),
+        Limit("max_cutbacks", MAX_CUTBACKS, "halvings of a failed load step: a 2^-60 step is below the resolution "
+              "of the load factor"),
         Limit("steps", MAX_TIME_STEPS, "time steps of one simulation (save_every is bounded by it too): a longer "
               "run is several runs, each continuing the last (initial=trajectory)"),
         Limit("divisions", MAX_CABLE_DIVISIONS, "segments of a straight cable"),

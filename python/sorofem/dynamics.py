@@ -6,7 +6,8 @@ Each time step of length ``dt`` minimises the incremental potential
 
 over the displacements ``u`` (``M``: lumped mass, ``rho V / 4`` per tet and node;
 ``D = alpha_M M + beta_K K``: Rayleigh damping; ``Pi``: elastic, cable and load potential),
-then sets ``v = (u - u_n) / dt``. Implicit Euler is unconditionally stable and dissipates
+then sets ``v = (u - u_n) / dt``. The stiffness-proportional part damps the rate of the internal
+force, ``beta_K (F(u) - F(u_n)) / dt``, which is ``beta_K K v`` for small steps. Implicit Euler is unconditionally stable and dissipates
 energy (it is first-order accurate), which is what a quasi-static soft robot needs; use a small
 ``dt`` to follow oscillations accurately. A step whose Newton solve fails is split in halves
 (counted in :attr:`Trajectory.cutbacks`).
@@ -330,6 +331,11 @@ class Trajectory:
         ``1/2 v^T M v`` of each frame, ``(frames,)``, J.
     iterations
         Newton iterations of each time step, ``(steps,)`` (sub-steps of a cut-back step added).
+    factorizations
+        Numeric factorisations of each time step's Hessian, ``(steps,)`` (the same way).
+    residuals
+        The relative residual each time step ended with, ``(steps,)``: below ``tolerance``
+        unless ``method="linearly_implicit"``.
     cutbacks
         How many time steps were split because Newton failed.
     cable_points
@@ -349,6 +355,8 @@ class Trajectory:
         self.velocities = np.asarray(out["velocities"], dtype=np.float64)
         self.kinetic_energy = np.asarray(out["kinetic_energy"], dtype=np.float64)
         self.iterations = np.asarray(out["iterations"], dtype=np.int64)
+        self.factorizations = np.asarray(out["factorizations"], dtype=np.int64)
+        self.residuals = np.asarray(out["residuals"], dtype=np.float64)
         self.cutbacks = int(out.get("cutbacks", 0))
         self.cable_points = [[np.asarray(p, dtype=np.float64) for p in frame] for frame in out.get("cable_points", [])]
         self.actuation = actuation
@@ -422,6 +430,10 @@ class Trajectory:
         )
 
 
+#: The step methods of :func:`simulate`, accurate (converged steps) ones first.
+STEP_METHODS = ("modified", "newton", "linearly_implicit")
+
+
 def simulate(
     body: Body,
     dt: float,
@@ -437,6 +449,7 @@ def simulate(
     max_iterations: int = 50,
     progress: bool | None = None,
     on_frames: Callable[[NDArray[np.float64], NDArray[np.float64], list[Any]], None] | None = None,
+    method: str = "modified",
 ) -> Trajectory:
     """Integrate the body's motion in time with implicit Euler (see the module docstring).
 
@@ -465,6 +478,15 @@ def simulate(
         Save every this many steps (the initial and the last state are always saved).
     tolerance, max_iterations
         Newton's relative residual tolerance and iteration limit per step.
+    method
+        How each step's minimisation is solved (see :data:`STEP_METHODS`): ``"modified"``
+        (default) keeps the Hessian's factorisation across iterations and steps and
+        refactorises where the residual falls by less than a quarter in an iteration;
+        ``"newton"`` refactorises at every iteration. Both converge every step to
+        ``tolerance``, so their trajectories agree to it. ``"linearly_implicit"`` takes one
+        iteration per step (SOFA's linearised implicit Euler): fast, less accurate and more
+        dissipative; each step's remaining residual is in :attr:`Trajectory.residuals`
+        (BENCHMARKS.md gives the accuracy on the hammerbot).
     progress
         A progress line on stderr (steps done, simulated time, Newton iterations per step,
         cutbacks, elapsed time, ETA): ``None`` (default) only when stderr is a terminal and the
@@ -516,6 +538,8 @@ def simulate(
     save_every = positive_int(save_every, "save_every", MAX_TIME_STEPS)
     tol = positive_scalar(tolerance, "tolerance")
     iters = positive_int(max_iterations, "max_iterations", MAX_NEWTON_ITERATIONS)
+    if method not in STEP_METHODS:
+        raise ParameterError(f"method: expected one of {', '.join(map(repr, STEP_METHODS))}, got {method!r}", "method")
     g = as_finite(gravity, "gravity", (3,))
     if on_frames is not None and not callable(on_frames):
         raise InputError(f"on_frames: expected a callable or None, got {describe(on_frames)}")
@@ -551,7 +575,7 @@ def simulate(
     def run(n: int, a: NDArray[np.float64], x: Any, v: Any, every: int) -> dict[str, Any]:
         return model.simulate(
             g, forces.copy(), prescribed.copy(), dt, n, a,
-            mass_damping, stiffness_damping, x, v, tol, iters, every,
+            mass_damping, stiffness_damping, x, v, tol, iters, every, method=method,
         )
 
     bar = Progress(total=steps, desc="simulate", unit="steps", enabled=progress)
@@ -618,6 +642,8 @@ class _Joined:
         self.kinetic_energy: list[NDArray[np.float64]] = []
         self.cable_points: list[Any] = []
         self.iterations: list[NDArray[np.int64]] = []
+        self.factorizations: list[NDArray[np.int64]] = []
+        self.residuals: list[NDArray[np.float64]] = []
         self.cutbacks = 0
         self.velocities: Any = None
         #: Steps integrated.
@@ -631,6 +657,8 @@ class _Joined:
             "kinetic_energy": np.concatenate(self.kinetic_energy),
             "cable_points": self.cable_points,
             "iterations": np.concatenate(self.iterations),
+            "factorizations": np.concatenate(self.factorizations),
+            "residuals": np.concatenate(self.residuals),
             "cutbacks": self.cutbacks,
         }
 
@@ -683,6 +711,8 @@ def _run_in_chunks(
         joined.kinetic_energy.append(np.asarray(out["kinetic_energy"], dtype=np.float64)[keep])
         joined.cable_points.extend(new_cables)
         joined.iterations.append(np.asarray(out["iterations"], dtype=np.int64))
+        joined.factorizations.append(np.asarray(out["factorizations"], dtype=np.int64))
+        joined.residuals.append(np.asarray(out["residuals"], dtype=np.float64))
         joined.cutbacks += int(out.get("cutbacks", 0))
         joined.velocities = out["velocities"]
         joined.done = end
