@@ -74,8 +74,8 @@ class _NonFiniteModel:
     def __init__(self, model):
         self._model = model
 
-    def solve(self, *args):
-        out = self._model.solve(*args)
+    def solve(self, *args, **kwargs):
+        out = self._model.solve(*args, **kwargs)
         out["positions"] = np.full_like(np.asarray(out["positions"]), np.nan)
         return out
 
