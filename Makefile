@@ -11,7 +11,7 @@ RUST_SOURCES := $(shell find crates -name '*.rs' -o -name Cargo.toml) Cargo.toml
 requirements = $(shell $(PYTHON) -c 'import shlex, sys, tomllib; p = tomllib.load(open("pyproject.toml", "rb"))["project"]; \
 	print(shlex.join(p["optional-dependencies"][sys.argv[1]] if sys.argv[1] else p["dependencies"]))' '$(1)')
 
-.PHONY: demo test test-rust test-python test-all bench build fmt clean docs test-viewer wheel test-wheel generate
+.PHONY: demo test test-rust test-python test-all bench build fmt clean docs test-viewer wheel test-wheel generate fuzz
 
 $(STAMP): pyproject.toml
 	@command -v $(PYTHON) >/dev/null || { echo "error: $(PYTHON) not found (set PYTHON=...)"; exit 1; }
@@ -75,6 +75,12 @@ docs: $(DOCS_STAMP)
 test-viewer: build
 	$(PY) -m pip install --quiet $(call requirements,viewer) "playwright>=1.40"
 	SOROFEM_BROWSER_TEST=1 $(PY) -m pytest -q tests/test_viewer.py -rs
+
+# The mesh-reader fuzz target (tests/fuzz_mesh_readers.py): many random and damaged mesh files,
+# new ones on every run (Hypothesis's "fuzz" profile). Not part of `test`. FUZZ_EXAMPLES=N.
+FUZZ_EXAMPLES ?= 20000
+fuzz: build
+	$(PY) tests/fuzz_mesh_readers.py --examples $(FUZZ_EXAMPLES)
 
 fmt:
 	cargo fmt --all

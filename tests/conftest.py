@@ -55,3 +55,8 @@ def box_scene(tmp_path: Path) -> Path:
     path = tmp_path / "scene.toml"
     path.write_text(BOX_SCENE, encoding="utf-8")
     return path
+
+
+# The Hypothesis profiles of the property suite ("ci": derandomised; "fuzz" for `make fuzz`),
+# loaded once for every test module.
+import tests.hostile  # noqa: E402,F401

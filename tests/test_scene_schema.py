@@ -312,7 +312,7 @@ def test_schema_lists_exactly_the_keys_the_validator_accepts(tmp_path):
 
 _KNOWN = {"$schema", "title", "description", "default", "type", "properties", "required", "additionalProperties",
           "items", "prefixItems", "minItems", "maxItems", "enum", "pattern", "minimum", "exclusiveMinimum",
-          "exclusiveMaximum", "anyOf", "allOf", "not"}
+          "maximum", "exclusiveMaximum", "anyOf", "allOf", "not"}
 _TYPES = {
     "object": lambda v: isinstance(v, dict),
     "array": lambda v: isinstance(v, list),
@@ -349,7 +349,7 @@ def _errors(schema: dict[str, Any], value: Any, path: str = "$") -> list[str]:
         errors.append(f"{path}: {value!r} does not match {schema['pattern']}")
     if _TYPES["number"](value):
         for name, ok in (("minimum", lambda a, b: a >= b), ("exclusiveMinimum", lambda a, b: a > b),
-                         ("exclusiveMaximum", lambda a, b: a < b)):
+                         ("maximum", lambda a, b: a <= b), ("exclusiveMaximum", lambda a, b: a < b)):
             if name in schema and not ok(value, schema[name]):
                 errors.append(f"{path}: {value} violates {name} {schema[name]}")
     if isinstance(value, dict):
