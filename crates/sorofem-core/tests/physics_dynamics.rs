@@ -97,11 +97,10 @@ fn rayleigh_damping_follows_the_one_dof_recurrence() {
             .zip(expected.iter().zip(&undamped))
         {
             // The node sits at the origin: its positions are its displacements.
-            for axis in 0..3 {
+            for x in &frame[..3] {
                 assert!(
-                    (frame[axis] - q * d).abs() < 1e-6 * amplitude,
-                    "alpha_M {alpha_m}, beta_K {beta_k}: {} vs {}",
-                    frame[axis],
+                    (x - q * d).abs() < 1e-6 * amplitude,
+                    "alpha_M {alpha_m}, beta_K {beta_k}: {x} vs {}",
                     q * d
                 );
             }

@@ -45,8 +45,8 @@ fn homogeneous(f: [[f64; 3]; 3], formulation: Formulation) -> (Model, Vec<f64>) 
     let solution = model.solve(&loads, None, &options).unwrap();
     for i in 0..mesh.n_nodes() {
         let x = map(&mesh.rest()[i]);
-        for k in 0..3 {
-            assert!((solution.positions[3 * i + k] - x[k]).abs() < 1e-12);
+        for (position, expected) in solution.positions[3 * i..3 * i + 3].iter().zip(x) {
+            assert!((position - expected).abs() < 1e-12);
         }
     }
     (model, solution.positions)
