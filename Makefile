@@ -13,7 +13,7 @@ $(STAMP): pyproject.toml
 	@command -v $(PYTHON) >/dev/null || { echo "error: $(PYTHON) not found (set PYTHON=...)"; exit 1; }
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet "maturin>=1.5,<2.0" "numpy>=1.24" "scipy>=1.10" "meshio>=5.3" "matplotlib>=3.7" "pytest>=7"
+	$(PY) -m pip install --quiet "maturin>=1.5,<2.0" "numpy>=1.24" "scipy>=1.10" "meshio>=5.3" "matplotlib>=3.7" "pytest>=7" "jsonschema>=4"
 # The optional mesher (extra `mesh`), so that `make test` covers sf.tetrahedralize; skipped without it.
 	$(PY) -m pip install --quiet "pytetwild>=0.2.3,<0.3" || echo "warning: pytetwild not installed: the sf.tetrahedralize tests will be skipped"
 	touch $(STAMP)

@@ -9,14 +9,9 @@ import numpy as np
 import pytest
 
 import sorofem as sf
-from sorofem.dynamics import Keyframes, evaluate_schedule, has_dynamics
+from sorofem.dynamics import Keyframes, evaluate_schedule
 
 GRAVITY = np.array([0.0, 0.0, -9.81])
-
-needs_dynamics = pytest.mark.skipif(
-    not has_dynamics(), reason="this build of sorofem._core has no Model.simulate (rebuild with `make build`)"
-)
-
 
 @pytest.fixture
 def silicone() -> sf.NeoHookean:
@@ -99,7 +94,6 @@ def test_simulate_argument_errors(beam):
 # -- time stepping -----------------------------------------------------------------------
 
 
-@needs_dynamics
 def test_free_fall_matches_the_implicit_euler_recurrence(silicone):
     """No supports, gravity only: every node follows v_{n+1} = v_n + dt g,
     x_{n+1} = x_n + dt v_{n+1}, i.e. x_n = x_0 + g dt^2 n (n + 1) / 2 (the body stays undeformed)."""
@@ -121,7 +115,6 @@ def test_free_fall_matches_the_implicit_euler_recurrence(silicone):
     assert list(traj.iterations) == [1] * steps and traj.cutbacks == 0
 
 
-@needs_dynamics
 def test_damped_beam_settles_to_the_static_solution(beam):
     static = sf.solve_static(beam, gravity=GRAVITY)
     # Near critical damping of the first bending mode (about 2 Hz).
@@ -133,7 +126,6 @@ def test_damped_beam_settles_to_the_static_solution(beam):
     assert traj.iterations.max() <= 10
 
 
-@needs_dynamics
 def test_cable_pull_then_hold_matches_the_static_pull(beam):
     cable = sf.Cable.line((0, 0.01, 0.01), (1, 0, 0), 0.4, 10, stiffness=1e5)
     beam.add_cable(cable)
@@ -147,7 +139,6 @@ def test_cable_pull_then_hold_matches_the_static_pull(beam):
     np.testing.assert_allclose(traj.cable_points[-1][0], static.cable_points[0], atol=2e-3 * static.max_displacement)
 
 
-@needs_dynamics
 def test_free_node_with_mass_settles_below(silicone):
     """A 0.1 kg free node on a 6 cm cable below a clamped cube swings down and settles where
     the taut spring carries its weight: k (L - l - w/2) = m g."""
@@ -162,7 +153,6 @@ def test_free_node_with_mass_settles_below(silicone):
     assert traj.cable_tensions(-1)[0][0] == pytest.approx(0.1 * 9.81, rel=1e-4)
 
 
-@needs_dynamics
 def test_continue_a_trajectory_and_body_state(beam):
     first = sf.simulate(beam, 0.01, 10, gravity=GRAVITY)
     second = sf.simulate(beam, 0.01, 10, gravity=GRAVITY, initial=first)
@@ -170,7 +160,6 @@ def test_continue_a_trajectory_and_body_state(beam):
     np.testing.assert_allclose(second.final_positions, whole.final_positions, atol=1e-9)
 
 
-@needs_dynamics
 def test_write_pvd(beam, tmp_path):
     two_cables(beam)
     traj = sf.simulate(beam, 0.01, 4, actuation=[lambda t: 1 - t, None], gravity=GRAVITY, save_every=2)
@@ -223,7 +212,6 @@ actuation = [[[0.0, 1.0], [0.2, 0.9]]]
 """
 
 
-@needs_dynamics
 def test_scene_dynamics_matches_the_api(tmp_path, beam):
     path = tmp_path / "dynamic.toml"
     path.write_text(DYNAMIC_SCENE, encoding="utf-8")
@@ -241,7 +229,6 @@ def test_scene_dynamics_matches_the_api(tmp_path, beam):
     assert scene.to_dict()["dynamics"]["actuation"] == [[[0.0, 1.0], [0.2, 0.9]]]
 
 
-@needs_dynamics
 def test_run_dynamic_scene(tmp_path):
     import json
 
@@ -317,7 +304,6 @@ def _same_trajectory(a, b, atol=1e-12):
             np.testing.assert_allclose(pa, pb, rtol=0, atol=atol)
 
 
-@needs_dynamics
 def test_simulate_with_progress_draws_a_line_and_gives_the_same_trajectory(beam, capsys):
     two_cables(beam)
     kwargs = dict(actuation=[Keyframes([[0, 1], [0.1, 0.8]]), None], gravity=GRAVITY, damping=(5.0, 0.01))
@@ -333,7 +319,6 @@ def test_simulate_with_progress_draws_a_line_and_gives_the_same_trajectory(beam,
     assert beam.actuations == [1.0, 0.9]
 
 
-@needs_dynamics
 @pytest.mark.parametrize("save_every, steps", [(1, 7), (3, 10), (4, 12), (50, 9)])
 def test_chunked_integration_saves_the_same_frames(beam, monkeypatch, save_every, steps):
     """With the line shown the steps run in chunks (here as small as possible: the first chunk
@@ -357,7 +342,6 @@ def test_chunked_integration_saves_the_same_frames(beam, monkeypatch, save_every
     _same_trajectory(plain, chunked)
 
 
-@needs_dynamics
 def test_simulate_progress_is_automatic(beam, monkeypatch, capsys):
     import sorofem.progress
 
@@ -375,7 +359,6 @@ def test_simulate_progress_is_automatic(beam, monkeypatch, capsys):
     assert quiet.text == ""
 
 
-@needs_dynamics
 def test_progress_with_free_cable_nodes_runs_in_one_piece(silicone, capsys):
     mesh = sf.Mesh.box(size=(0.1, 0.1, 0.1), cells=(2, 2, 2))
     body = sf.Body(mesh, silicone)

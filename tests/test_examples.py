@@ -11,6 +11,7 @@ from types import ModuleType
 
 import numpy as np
 import pytest
+from ci import missing_in_ci
 
 from sorofem.cli import main
 
@@ -46,7 +47,7 @@ def test_example_checks_pass(path, tmp_path):
     assert callable(getattr(module, "run", None)), f"{path.name} has no run(out_dir)"
     missing = [str(f) for f in getattr(module, "REQUIRED_FILES", ()) if not Path(f).is_file()]
     if missing:
-        pytest.skip(f"{path.name} needs data that is not here: {', '.join(missing)}")
+        missing_in_ci(f"{path.name} needs data that is not here: {', '.join(missing)}")
     for name in getattr(module, "REQUIRED_MODULES", ()):  # optional extras, e.g. the mesher
         pytest.importorskip(name, reason=f"{path.name} needs the optional module {name}")
     # Heavy examples take ``quick`` (fewer cases, same checks); their full runs are benchmarks.

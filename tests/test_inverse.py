@@ -10,12 +10,6 @@ import pytest
 from fdcheck import check_gradient
 
 import sorofem as sf
-from sorofem import _core
-
-pytestmark = pytest.mark.skipif(
-    not hasattr(_core.Model, "adjoint") or not hasattr(_core.Model, "forward"),
-    reason="the extension has no Model.adjoint / Model.forward yet (rebuild with `make build`)",
-)
 
 SIZE, CELLS = (0.4, 0.1, 0.1), (4, 2, 2)
 G = np.array([0.0, 0.0, -9.81])

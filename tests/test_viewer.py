@@ -23,7 +23,7 @@ import sorofem as sf
 viser = pytest.importorskip("viser", reason="optional extra sorofem[viewer] (viser) not installed")
 trimesh = pytest.importorskip("trimesh")
 
-from sorofem.dynamics import Keyframes, has_dynamics  # noqa: E402
+from sorofem.dynamics import Keyframes  # noqa: E402
 from sorofem.viewer import (  # noqa: E402
     build_trajectory_view,
     build_view,
@@ -153,9 +153,6 @@ def test_nodal_fields_of_a_homogeneous_stretch() -> None:
 # ---------------------------------------------------------------------------
 # Playback of a trajectory
 
-needs_dynamics = pytest.mark.skipif(not has_dynamics(), reason="this build of sorofem._core has no Model.simulate")
-
-
 def _pulled_cantilever(steps: int = 30, save_every: int = 3) -> sf.Trajectory:
     """The cable cantilever pulled to alpha = 0.8 over 0.3 s: 11 frames, 0 .. 0.6 s."""
     mesh = sf.Mesh.box(size=(0.4, 0.1, 0.1), cells=(8, 2, 2))
@@ -181,8 +178,6 @@ def _segments(points: np.ndarray) -> np.ndarray:
 
 @pytest.fixture()
 def trajectory() -> sf.Trajectory:
-    if not has_dynamics():
-        pytest.skip("this build of sorofem._core has no Model.simulate")
     return _pulled_cantilever()
 
 
@@ -284,7 +279,6 @@ def test_nothing_to_play(tmp_path) -> None:
         load_frames(tmp_path / "broken.pvd")
 
 
-@needs_dynamics
 def test_single_frame_trajectory_does_not_play(server) -> None:
     traj = _pulled_cantilever(steps=1, save_every=5)
     assert traj.n_frames == 2
@@ -297,7 +291,6 @@ def test_single_frame_trajectory_does_not_play(server) -> None:
     assert view.frame == 0
 
 
-@needs_dynamics
 def test_cli_plays_a_run_folder_and_a_dynamic_scene(tmp_path, trajectory, monkeypatch, capsys) -> None:
     """``sorofem view`` (viewer._cli) with the serving loop replaced by an immediate stop."""
     import sorofem.viewer as viewer
@@ -338,7 +331,6 @@ def _dynamic_scene(tmp_path: Path, extra: str = PULL) -> Path:
     return path
 
 
-@needs_dynamics
 def test_simulate_button_plays_the_dynamics_in_the_page(server, tmp_path) -> None:
     path = _dynamic_scene(tmp_path)
     view = build_view(sf.Scene.load(path), server)
@@ -464,7 +456,6 @@ def test_browser_plays_a_trajectory(server, trajectory) -> None:
 
 
 @browser_test
-@needs_dynamics
 def test_browser_simulates_and_plays_a_scene(server, tmp_path) -> None:
     view = build_view(sf.Scene.load(_dynamic_scene(tmp_path)), server)
     try:
