@@ -132,7 +132,7 @@ def _check_blocks(
         for r, rows in enumerate(_partition(row_blocks, analytic.size)):
             error = _relative_error(analytic[rows], numeric[rows], atol)
             errors[(r, c)] = error
-            if worst is None or error > worst[0]:
+            if worst is None or not error <= worst[0]:  # a NaN is the worst of all
                 worst = (error, analytic[rows], numeric[rows])
     assert worst is not None, "blocks: expected at least one block"
     return FDCheck(worst[1], worst[2], worst[0], rtol, step, errors)

@@ -63,6 +63,16 @@ def test_gradient_blocks_isolate_a_weak_parameter():
     assert not fd.passed and fd.block_errors[(0, 1)] > 1e2 * fd.rtol
 
 
+def test_a_nan_in_any_block_fails():
+    def nan_in_one_row(x: np.ndarray) -> np.ndarray:
+        y = A @ x
+        y[3] = np.nan
+        return y
+
+    assert not check_jacobian(nan_in_one_row, X0, A, blocks=BLOCKS, row_blocks=BLOCKS).passed
+    assert not check_jacobian(nan_in_one_row, X0, A).passed
+
+
 def test_blocks_must_be_disjoint_and_inside():
     with pytest.raises(ValueError, match="blocks"):
         check_jacobian(linear, X0, A, blocks=[[0, 1], [1, 2]])

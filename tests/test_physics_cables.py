@@ -20,6 +20,7 @@ import sorofem as sf
 from independent import material_point_positions
 
 E, NU = 1e5, 0.3  # Pa; compressible, so linear tets bend without volumetric locking
+GRAVITY = (0.0, 0.0, -9.81)
 SECTION = 0.1  # m, square cross-section side
 
 
@@ -98,3 +99,66 @@ def test_cable_points_move_with_the_material():
     np.testing.assert_allclose(
         result.cable_points[1], material_point_positions(body.mesh, second.points, result.positions), rtol=0, atol=1e-12
     )
+
+
+def test_tension_law_in_its_three_regimes():
+    """Every node prescribed (x -> x + u(x), u = 0, -1, 1, 8 cm on the planes x = 0, 0.1, 0.2,
+    0.3 m), a cable through the planes with a wide transition (w = 0.5 l = 5 cm): its segments
+    are stretched by s = -1, 2 and 7 cm, i.e. slack, in the transition and taut. The unilateral
+    spring's tension ``k psi'(s)`` is 0, ``k s^2 / (2 w)`` and ``k (s - w / 2)``; the solver's
+    tensions and the NumPy ``segment_tensions`` must both give it."""
+    mesh = sf.Mesh.box(size=(0.3, 0.1, 0.1), cells=(3, 1, 1))
+    body = sf.Body(mesh, sf.NeoHookean(youngs_modulus=E, poisson_ratio=NU))
+    planes, shifts = [0.0, 0.1, 0.2, 0.3], [0.0, -0.01, 0.01, 0.08]
+    displacement = np.zeros((mesh.n_nodes, 3))
+    displacement[:, 0] = np.interp(mesh.points[:, 0], planes, shifts)
+    body.fix(np.arange(mesh.n_nodes), displacement=displacement)
+    k, w = 1e3, 0.05
+    cable = sf.Cable([[x, 0.05, 0.05] for x in planes], k, 1.0, transition=0.5)
+    body.add_cable(cable)
+    result = sf.solve_static(body)
+    s = np.diff(shifts)
+    expected = [0.0, k * s[1] ** 2 / (2 * w), k * (s[2] - w / 2)]
+    np.testing.assert_allclose(result.cable_tensions[0], expected, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(sf.cables.segment_tensions(cable, result.cable_points[0]), expected, rtol=1e-12, atol=1e-12)
+
+
+def test_a_default_cable_is_at_rest_and_undamped():
+    """The documented defaults: alpha = 1 (rest), no dashpot, massless free nodes."""
+    cable = sf.Cable([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0]], 1e3)
+    assert (cable.actuation, cable.damping, cable.free_node_mass) == (1.0, 0.0, 0.0)
+
+
+def continuation_body() -> tuple[sf.Body, sf.Cable]:
+    mesh = sf.Mesh.box(size=(0.4, 0.1, 0.1), cells=(8, 2, 2))
+    body = sf.Body(mesh, sf.NeoHookean(youngs_modulus=66e3, poisson_ratio=0.45, density=1080))
+    body.fix(mesh.nodes_on_plane((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)))
+    cable = sf.Cable.line((0.0, 0.01, 0.01), (1.0, 0.0, 0.0), 0.4, 10, stiffness=1e5)
+    body.add_cable(cable)
+    return body, cable
+
+
+def test_continuation_halves_failed_steps_and_reaches_the_same_equilibrium():
+    """One jump from alpha = 1 to 0.6 with at most 5 Newton iterations per solve fails; the
+    continuation halves it until solves converge, then works its way to 0.6. The elastic
+    equilibrium does not depend on the path: the default path of small steps gives the same
+    positions (1e-8 of the largest displacement)."""
+    body, cable = continuation_body()
+    path = sf.actuate(body, cable, [0.6], gravity=GRAVITY, max_iterations=5)
+    alphas = [r.actuations[0] for r in path]
+    assert len(path) > 2 and alphas[-1] == 0.6 and np.all(np.diff([1.0, *alphas]) < 0), alphas
+    halvings = np.log2(0.4 / (1.0 - alphas[0]))  # the first alpha is 1 + (0.6 - 1) / 2^k
+    assert halvings > 0.5 and abs(halvings - round(halvings)) < 1e-9, alphas
+    reference_body, reference_cable = continuation_body()
+    reference = sf.actuate(reference_body, reference_cable, 0.6, gravity=GRAVITY, tolerance=1e-10)[-1]
+    error = np.abs(path[-1].positions - reference.positions).max()
+    assert error < 1e-8 * reference.max_displacement
+    # Without a gravity argument the path is solved without gravity, like solve_static's default.
+    body, cable = continuation_body()
+    pulled = sf.actuate(body, cable, [0.9])[-1]
+    np.testing.assert_allclose(pulled.positions, sf.solve_static(body).positions, rtol=0, atol=1e-9)
+    # Too few iterations for any step: an error that keeps the body at its last equilibrium.
+    body, cable = continuation_body()
+    with pytest.raises(sf.ConvergenceError, match="after halving") as info:
+        sf.actuate(body, cable, [0.6], gravity=GRAVITY, max_iterations=3)
+    assert body.actuations == [1.0]

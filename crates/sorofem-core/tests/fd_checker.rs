@@ -96,3 +96,25 @@ fn a_wrong_large_entry_fails_the_whole_matrix_check() {
         0.0,
     );
 }
+
+#[test]
+#[should_panic(expected = "NaN")]
+fn a_nan_anywhere_fails() {
+    let (a, labels) = two_scale_matrix();
+    let nan_in_one_row = |x: &[f64]| {
+        let mut y = apply(&a, x);
+        y[3] = f64::NAN;
+        y
+    };
+    check_jacobian_blocks(
+        "nan",
+        &[0.3, -0.2, 0.7, 0.1],
+        1e-6,
+        nan_in_one_row,
+        &a,
+        &labels,
+        &labels,
+        1e-6,
+        1e-15,
+    );
+}

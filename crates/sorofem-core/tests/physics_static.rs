@@ -127,3 +127,74 @@ fn reactions_carry_the_weight_of_a_two_density_bar() {
         -weight
     );
 }
+
+/// Point forces on the free end of a clamped bar: the supports return them, force and moment
+/// about the origin at the deformed positions (1e-10), and the term's gradient is the
+/// derivative of its energy `-f . u`.
+#[test]
+fn reactions_return_nodal_forces_and_their_moment() {
+    use sorofem_core::energy::{HessianMode, NodalForceTerm, Term};
+    let mesh = Arc::new(TetMesh::box_mesh([0.4, 0.1, 0.1], [8, 2, 2], [0.0; 3]).unwrap());
+    let tip = mesh.nodes_in_box([0.4 - 1e-9, -1.0, -1.0], [0.4 + 1e-9, 1.0, 1.0]);
+    let nodal_forces: Vec<(usize, [f64; 3])> = tip
+        .iter()
+        .enumerate()
+        .map(|(k, &i)| (i, [-0.3, 0.2 + 0.01 * k as f64, -0.5]))
+        .collect();
+    let mut model = common::clamped_at_x0(mesh.clone(), 3e5, 0.3, 0.0, Formulation::Standard);
+    let loads = Loads {
+        nodal_forces: nodal_forces.clone(),
+        ..Default::default()
+    };
+    let options = SolveOptions {
+        tolerance: 1e-12,
+        ..Default::default()
+    };
+    let solution = model.solve(&loads, None, &options).unwrap();
+    let x = |i: usize| [0, 1, 2].map(|k| solution.positions[3 * i + k]);
+    let cross = |a: [f64; 3], b: [f64; 3]| {
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    };
+    let (mut force, mut moment) = ([0.0; 3], [0.0; 3]);
+    for (&i, r) in model.fixed_nodes().iter().zip(&solution.reactions) {
+        let m = cross(x(i), *r);
+        for k in 0..3 {
+            force[k] += r[k];
+            moment[k] += m[k];
+        }
+    }
+    for &(i, f) in &nodal_forces {
+        let m = cross(x(i), f);
+        for k in 0..3 {
+            force[k] += f[k];
+            moment[k] += m[k];
+        }
+    }
+    assert!(
+        force.iter().chain(&moment).all(|v| v.abs() < 1e-10),
+        "unbalanced: force {force:?}, moment {moment:?}"
+    );
+    let term = NodalForceTerm {
+        nodes: nodal_forces.iter().map(|&(i, _)| i).collect(),
+        forces: nodal_forces.iter().map(|&(_, f)| f).collect(),
+    };
+    let mut dofs = vec![0; term.stencil_size()];
+    for e in 0..term.n_elements() {
+        term.element_dofs(e, &mut dofs);
+        assert_eq!(
+            dofs,
+            (3 * term.nodes[e]..3 * term.nodes[e] + 3).collect::<Vec<_>>()
+        );
+        let z = [0.01, -0.02, 0.03];
+        let mut grad = vec![0.0; 3];
+        term.element(e, &z, Some(&mut grad), None, HessianMode::Exact);
+        let energy = |u: &[f64]| term.element(e, u, None, None, HessianMode::Exact);
+        common::check_gradient("nodal force", &z, 1e-6, energy, &grad, 1e-9, 1e-15);
+        let f = term.forces[e];
+        assert!((energy(&z) + f[0] * z[0] + f[1] * z[1] + f[2] * z[2]).abs() < 1e-15);
+    }
+}

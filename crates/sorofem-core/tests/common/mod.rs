@@ -98,7 +98,8 @@ pub fn check_jacobian_blocks(
             let fd = (fp[i] - fm[i]) / (2.0 * step);
             let block_scale = scale[&(row_block[i], col_block[j])];
             let ratio = (fd - jac[i * n + j]).abs() / (rtol * block_scale + atol);
-            if ratio > worst.0 {
+            // A NaN (from either side) is the worst of all.
+            if ratio.is_nan() || ratio > worst.0 {
                 worst = (ratio, i, j, fd, jac[i * n + j], block_scale);
             }
         }
