@@ -6,16 +6,20 @@ STAMP := $(VENV)/.deps-stamp
 BUILD_STAMP := $(VENV)/.build-stamp
 DOCS_STAMP := $(VENV)/.docs-stamp
 RUST_SOURCES := $(shell find crates -name '*.rs' -o -name Cargo.toml) Cargo.toml pyproject.toml
+# The requirements pyproject.toml declares, shell-quoted: $(call requirements) for the package's
+# own, $(call requirements,EXTRA) for an extra's. pyproject.toml is their one source.
+requirements = $(shell $(PYTHON) -c 'import shlex, sys, tomllib; p = tomllib.load(open("pyproject.toml", "rb"))["project"]; \
+	print(shlex.join(p["optional-dependencies"][sys.argv[1]] if sys.argv[1] else p["dependencies"]))' '$(1)')
 
-.PHONY: demo test test-rust test-python test-all bench build fmt clean docs test-viewer mutants
+.PHONY: demo test test-rust test-python test-all bench build fmt clean docs test-viewer wheel test-wheel generate mutants
 
 $(STAMP): pyproject.toml
 	@command -v $(PYTHON) >/dev/null || { echo "error: $(PYTHON) not found (set PYTHON=...)"; exit 1; }
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet "maturin>=1.5,<2.0" "numpy>=1.24" "scipy>=1.10" "meshio>=5.3" "matplotlib>=3.7" "pytest>=7" "jsonschema>=4"
+	$(PY) -m pip install --quiet "maturin>=1.5,<2.0" $(call requirements) $(call requirements,test)
 # The optional mesher (extra `mesh`), so that `make test` covers sf.tetrahedralize; skipped without it.
-	$(PY) -m pip install --quiet "pytetwild>=0.2.3,<0.3" || echo "warning: pytetwild not installed: the sf.tetrahedralize tests will be skipped"
+	$(PY) -m pip install --quiet $(call requirements,mesh) || echo "warning: pytetwild not installed: the sf.tetrahedralize tests will be skipped"
 	touch $(STAMP)
 
 $(BUILD_STAMP): $(STAMP) $(RUST_SOURCES)
@@ -35,26 +39,39 @@ test-python: build
 
 test: test-rust test-python
 
-test-all: build
+test-all: build wheel $(DOCS_STAMP)
 	cargo test --release -p sorofem-core -- --include-ignored
 	$(PY) -m pytest -q -m ""
 
+# An abi3 wheel (one for CPython >= 3.11) of the release build into dist/; it installs without
+# Rust. It reuses the release build of `make build` (same profile, same target/).
+wheel: $(STAMP)
+	rm -f dist/sorofem-*.whl
+	VIRTUAL_ENV=$(abspath $(VENV)) PATH=$(abspath $(VENV))/bin:$$PATH $(VENV)/bin/maturin build --release --out dist --quiet
+
+# Installs that wheel into a fresh virtual environment with no Rust toolchain on PATH and runs
+# examples/scenes/cantilever.toml with its `sorofem` command (tests/test_packaging.py, marker `wheel`).
+test-wheel: build wheel
+	$(PY) -m pytest -q -m wheel tests/test_packaging.py
+
 bench: build
-	$(PY) -m pip install --quiet "scikit-fem>=10"
+	$(PY) -m pip install --quiet $(call requirements,bench)
 	$(PY) benchmarks/run.py --write BENCHMARKS.md
 	$(PY) -m pytest -q -m bench
 
 # The documentation site (mkdocs.yml, docs/) into site/; warnings are errors. Not part of `test`.
-$(DOCS_STAMP): $(STAMP)
-	$(PY) -m pip install --quiet "mkdocs>=1.5" "mkdocstrings[python]>=0.24"
+# tests/test_docs_site.py (marker `docs`) builds it once more and reads every page.
+$(DOCS_STAMP): $(STAMP) pyproject.toml
+	$(PY) -m pip install --quiet $(call requirements,docs)
 	touch $(DOCS_STAMP)
 
 docs: $(DOCS_STAMP)
 	$(VENV)/bin/mkdocs build --strict --quiet
+	$(PY) -m pytest -q -m docs tests/test_docs_site.py
 
 # The browser viewer (optional extra) and, when Debian's chromium is installed, a real-browser test.
 test-viewer: build
-	$(PY) -m pip install --quiet "viser>=1.0" "playwright>=1.40"
+	$(PY) -m pip install --quiet $(call requirements,viewer) "playwright>=1.40"
 	SOROFEM_BROWSER_TEST=1 $(PY) -m pytest -q tests/test_viewer.py -rs
 
 # Mutation testing (docs/testing.md), not part of `test` or CI: every mutant rebuilds the core and
@@ -79,5 +96,10 @@ mutants: build
 fmt:
 	cargo fmt --all
 
+# The copies generated from the scene spec (docs/scene.schema.json, README.md's key table, the
+# sorofem.scene docstring); the tests fail when they are stale.
+generate: build
+	$(PY) -m sorofem.scene.generate
+
 clean:
-	rm -rf target $(VENV) results
+	rm -rf target $(VENV) results dist

@@ -74,7 +74,7 @@ def test_scene_schema_include_is_complete() -> None:
     from sorofem import scene
 
     schema = _hooks().scene_schema()
-    for key in scene._TOP_KEYS:
+    for key in scene.TOP_KEYS:
         assert re.search(rf"^\[\[?{key}\]\]?", schema.replace("```toml\n", ""), flags=re.M), key
 
 

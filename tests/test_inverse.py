@@ -119,12 +119,13 @@ def test_gradient_field_and_callable_objective():
 
 def test_forward_sensitivity_jacobian_matches_adjoint():
     """Least squares builds J from forward sensitivities; J^T r must equal the adjoint gradient."""
-    from sorofem.inverse import _Params, _Problem, _scenarios
+    from sorofem.inverse._parameters import Parameters
+    from sorofem.inverse._problem import Problem, scenarios
 
     body = build()
     target = tip_target(body)
-    p = _Params(body, ["shear_modulus", "lame_lambda"])
-    problem = _Problem(body, p, _scenarios(body, target, None, G, {"tolerance": TIGHT, "max_iterations": 50, "load_steps": 1}))
+    p = Parameters(body, ["shear_modulus", "lame_lambda"])
+    problem = Problem(body, p, scenarios(body, target, None, G, sf.SolveOptions(TIGHT, 50, 1)))
     s = p.to_s(p.current())
     r, J = problem.evaluate(s, "jacobian")
     _, grad = problem.evaluate(s, "gradient")

@@ -61,7 +61,7 @@ def test_body_takes_formulation_options():
     assert "pressure_mass='lumped'" in repr(body)
     standard = sf.Body(mesh, material)
     assert standard.formulation_options == {"volumetric": "log"}
-    assert "mixed" in sf.model.FORMULATIONS
+    assert "mixed" in sf.body.FORMULATIONS
 
 
 @pytest.mark.parametrize(

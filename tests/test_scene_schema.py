@@ -25,7 +25,7 @@ from sorofem.cli import main
 
 ROOT = Path(__file__).resolve().parent.parent
 COMMITTED = ROOT / "docs" / "scene.schema.json"
-REGENERATE = "sorofem schema --out docs/scene.schema.json --force"
+REGENERATE = "make generate"
 
 #: A scene that uses every table of the schema (each selection in its table form).
 FULL_SCENE = """\
@@ -226,9 +226,19 @@ def test_full_scene_is_valid():
 
 def test_committed_schema_is_current():
     assert COMMITTED.is_file(), f"{COMMITTED} is missing: run `{REGENERATE}`"
-    assert COMMITTED.read_text(encoding="utf-8") == scene_module._schema_text(), (
+    assert COMMITTED.read_text(encoding="utf-8") == scene_module.schema_text(), (
         f"docs/scene.schema.json differs from sorofem.scene.json_schema(): regenerate it with `{REGENERATE}`"
     )
+
+
+def test_generated_copies_are_current():
+    """README.md's key table and the annotated example in sorofem.scene's docstring are generated
+    from the same spec as the schema (sorofem.scene.generate)."""
+    from sorofem.scene import generate
+
+    stale = [str(path.relative_to(ROOT)) for path, text in generate.render(ROOT).items()
+             if path.read_text(encoding="utf-8") != text]
+    assert not stale, f"generated from the scene spec but stale: {stale}; regenerate them with `{REGENERATE}`"
 
 
 def test_schema_header():
@@ -421,7 +431,7 @@ def test_cli_schema_prints_the_schema(capsys):
 def test_cli_schema_out_never_overwrites_without_force(tmp_path, capsys):
     out = tmp_path / "sub" / "scene.schema.json"
     assert main(["schema", "--out", str(out)]) == 0
-    assert out.read_text(encoding="utf-8") == scene_module._schema_text()
+    assert out.read_text(encoding="utf-8") == scene_module.schema_text()
     assert str(out) in capsys.readouterr().out
     out.write_text("mine", encoding="utf-8")
     assert main(["schema", "--out", str(out)]) == 2
@@ -429,7 +439,7 @@ def test_cli_schema_out_never_overwrites_without_force(tmp_path, capsys):
     assert len(err) == 1 and err[0].startswith("error: --out:") and "exists" in err[0] and "--force" in err[0]
     assert out.read_text(encoding="utf-8") == "mine"
     assert main(["schema", "--out", str(out), "--force"]) == 0
-    assert out.read_text(encoding="utf-8") == scene_module._schema_text()
+    assert out.read_text(encoding="utf-8") == scene_module.schema_text()
 
 
 @pytest.mark.parametrize("argv, words", [

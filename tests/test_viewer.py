@@ -20,7 +20,7 @@ import pytest
 
 import sorofem as sf
 
-viser = pytest.importorskip("viser", reason="optional extra sorofem[viewer] (viser) not installed")
+viser = pytest.importorskip("viser", reason="the optional extra viewer (viser) is not installed: pip install \".[viewer]\"")
 trimesh = pytest.importorskip("trimesh")
 
 from sorofem.dynamics import Keyframes  # noqa: E402
@@ -152,6 +152,7 @@ def test_nodal_fields_of_a_homogeneous_stretch() -> None:
 
 # ---------------------------------------------------------------------------
 # Playback of a trajectory
+
 
 def _pulled_cantilever(steps: int = 30, save_every: int = 3) -> sf.Trajectory:
     """The cable cantilever pulled to alpha = 0.8 over 0.3 s: 11 frames, 0 .. 0.6 s."""
@@ -292,7 +293,7 @@ def test_single_frame_trajectory_does_not_play(server) -> None:
 
 
 def test_cli_plays_a_run_folder_and_a_dynamic_scene(tmp_path, trajectory, monkeypatch, capsys) -> None:
-    """``sorofem view`` (viewer._cli) with the serving loop replaced by an immediate stop."""
+    """``sorofem view`` (viewer.serve) with the serving loop replaced by an immediate stop."""
     import sorofem.viewer as viewer
 
     served = []
@@ -303,19 +304,19 @@ def test_cli_plays_a_run_folder_and_a_dynamic_scene(tmp_path, trajectory, monkey
             on_stop()
         server.stop()
 
-    monkeypatch.setattr(viewer, "_serve", serve_once)
+    monkeypatch.setattr(viewer.serving, "wait_until_interrupted", serve_once)
     trajectory.write_pvd(tmp_path / "run")
-    assert viewer._cli(tmp_path / "run", port=_free_port()) == 0
+    assert viewer.serve(tmp_path / "run", port=_free_port()) == 0
     assert "(11 frames)" in capsys.readouterr().out
     dynamic = tmp_path / "pull.toml"
     dynamic.write_text((SCENES / "cable_cantilever.toml").read_text(encoding="utf-8")
                        + "\n[dynamics]\ndt = 0.02\nsteps = 6\nsave_every = 2\nmass_damping = 5.0\n", encoding="utf-8")
-    assert viewer._cli(dynamic, port=_free_port(), trajectory=True) == 0
+    assert viewer.serve(dynamic, port=_free_port(), trajectory=True) == 0
     assert "(4 frames)" in capsys.readouterr().out
-    assert viewer._cli(dynamic, port=_free_port()) == 0  # without --trajectory: the static view
+    assert viewer.serve(dynamic, port=_free_port()) == 0  # without --trajectory: the static view
     assert "frames" not in capsys.readouterr().out
     with pytest.raises(sf.InputError, match=r"\[dynamics\]"):
-        viewer._cli(SCENES / "cantilever.toml", port=_free_port(), trajectory=True)
+        viewer.serve(SCENES / "cantilever.toml", port=_free_port(), trajectory=True)
     assert len(served) == 3
 
 

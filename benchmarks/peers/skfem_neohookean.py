@@ -183,7 +183,7 @@ def solve_with_load_steps(
 def box_mesh(
     size: Sequence[float], cells: Sequence[int], origin: Sequence[float] = (0.0, 0.0, 0.0)
 ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-    """The box mesh of ``sorofem.Mesh.box``, for when the extension is not built.
+    """The box mesh of ``sorofem.Mesh.box``, written anew: the peer case checks that both agree.
 
     Node ``(i, j, k)`` has index ``i + (nx+1) (j + (ny+1) k)``; each hex is split into six tets
     around its main diagonal (Kuhn subdivision), and negatively oriented tets get nodes 2 and 3

@@ -1,7 +1,7 @@
 """MkDocs hook: pages include text that is written once, where the code and README keep it.
 
-* ``<!-- scene-schema: ... -->`` becomes the annotated schema of ``python/sorofem/scene.py``'s
-  module docstring (its ``Schema`` section), as a TOML block.
+* ``<!-- scene-schema: ... -->`` becomes the annotated schema of ``python/sorofem/scene/__init__.py``'s
+  module docstring (its ``Schema`` section, generated from the scene spec), as a TOML block.
 * ``<!-- readme-scene-keys: ... -->`` becomes README.md's table of every scene key and the
   paragraphs after it, up to "Validation is strict"; links to repository files become code spans.
 """
@@ -14,13 +14,16 @@ import textwrap
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-SCENE = ROOT / "python" / "sorofem" / "scene.py"
+SCENE = ROOT / "python" / "sorofem" / "scene" / "__init__.py"
 README = ROOT / "README.md"
 SCHEMA_MARKER = re.compile(r"<!-- scene-schema:[^>]*-->")
 KEYS_MARKER = re.compile(r"<!-- readme-scene-keys:[^>]*-->")
 # [`text`](relative/path) or [text](relative/path), not http(s) or in-page anchors.
 REPO_LINK = re.compile(r"\[`?([^\]`]+)`?\]\((?!https?:|#)([^)]+)\)")
-README_ANCHORS = {"#formulations": "theory.md#mixed-formulation"}
+README_ANCHORS = {
+    "#formulations": "theory.md#mixed-formulation",
+    "#from-a-surface-to-a-simulation": "getting-started.md#from-a-surface-to-a-simulation",
+}
 
 
 def scene_schema() -> str:
@@ -38,7 +41,8 @@ def readme_scene_keys() -> str:
     start, end = text.find("Every key:\n"), text.find("Validation is strict")
     if start < 0 or end < start:
         raise ValueError(f"{README}: expected 'Every key:' followed by 'Validation is strict' in 'Scene files'")
-    section = text[start + len("Every key:\n"):end].strip()
+    # The table between its generator's markers (HTML comments, which the site does not need).
+    section = re.sub(r"<!--.*?-->\n?", "", text[start + len("Every key:\n"):end]).strip()
     for anchor, target in README_ANCHORS.items():
         section = section.replace(f"]({anchor})", f"]({target})")
     return REPO_LINK.sub(lambda m: f"`{m.group(1)}`" if ".md" not in m.group(2) else m.group(0), section)

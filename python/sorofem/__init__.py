@@ -11,10 +11,13 @@ Examples
 (81, 3)
 """
 
-from importlib.metadata import PackageNotFoundError, version as _version
+from importlib import import_module
 
-from . import cables, dynamics, errors, inverse, io, plot, targets
-from .cables import Cable, actuate
+from . import cables, dynamics, errors, inverse, io, materials, meshing, plot, progress, solver, targets
+from ._deprecated import moved as _moved
+from ._version import __version__
+from .body import Body
+from .cables import Cable
 from .dynamics import Trajectory, simulate
 from .errors import (
     ConvergenceError,
@@ -26,16 +29,24 @@ from .errors import (
     SolverError,
     SorofemError,
 )
-from .model import Body, Mesh, NeoHookean, SolveReport, StaticResult, solve_static
-from .scene import Scene
-from .targets import Target
 from .inverse import control, estimate, gradient
+from .materials import NeoHookean
+from .mesh import Mesh
 from .meshing import tetrahedralize  # the mesher itself (optional extra) is imported on first use
+from .scene import Scene
+from .solver import SolveOptions, SolveReport
+from .static import StaticResult, actuate, solve_static
+from .targets import Target
 
-try:
-    __version__ = _version("sorofem")
-except PackageNotFoundError:  # running from a source tree that was never installed
-    __version__ = "0.0.0"
+# sorofem.cables.actuate moved up a layer (it solves): the old name answers from here.
+cables.__getattr__ = _moved("sorofem.cables", {"actuate": (lambda: actuate, "sorofem.actuate")})
+
+
+def __getattr__(name: str) -> object:
+    # sf.model: the deprecated module (it warns when imported), loaded on first use only.
+    if name == "model":
+        return import_module(".model", __name__)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 __all__ = [
     "__version__",
@@ -45,6 +56,7 @@ __all__ = [
     "solve_static",
     "StaticResult",
     "SolveReport",
+    "SolveOptions",
     "Scene",
     "Cable",
     "actuate",
@@ -68,7 +80,10 @@ __all__ = [
     "errors",
     "inverse",
     "io",
+    "materials",
     "meshing",
     "plot",
+    "progress",
+    "solver",
     "targets",
 ]

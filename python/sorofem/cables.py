@@ -38,44 +38,23 @@ import math
 import numbers
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NamedTuple, Sequence
+from typing import Any, NamedTuple, Protocol, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import ConvergenceError, InputError, ParameterError, ShapeError
+from ._validate import describe, real
+from .errors import InputError, ParameterError, ShapeError
 
-if TYPE_CHECKING:
-    from .model import Body, StaticResult
-
-__all__ = ["Cable", "CablePlacement", "OUTSIDE_MODES", "actuate", "segment_tensions", "write_cables"]
+__all__ = ["Cable", "CablePlacement", "OUTSIDE_MODES", "segment_tensions", "write_cables"]
 
 #: What to do with a cable point farther than ``snap_tolerance`` from the mesh.
 OUTSIDE_MODES: tuple[str, ...] = ("error", "free")
 
-#: Largest change of alpha per continuation step when :func:`actuate` builds the path.
+#: Largest change of alpha per continuation step when :func:`sorofem.actuate` builds the path.
 DEFAULT_ALPHA_STEP = 0.05
-#: How many times :func:`actuate` halves a failed continuation step before giving up.
+#: How many times :func:`sorofem.actuate` halves a failed continuation step before giving up.
 MAX_HALVINGS = 6
-
-
-def _describe(value: Any) -> str:
-    if isinstance(value, np.ndarray):
-        return f"an array of shape {value.shape} and dtype {value.dtype}"
-    return f"{type(value).__name__} {value!r}"
-
-
-def _real(value: Any, name: str, *, minimum: float, strict: bool, maximum: float | None = None) -> float:
-    """A finite real number above ``minimum`` (strictly or not) and below ``maximum`` (strictly)."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise ParameterError(f"{name}: expected a number, got {_describe(value)}", name)
-    value = float(value)
-    below = value <= minimum if strict else value < minimum
-    if not math.isfinite(value) or below or (maximum is not None and value >= maximum):
-        lo = f"{'>' if strict else '>='} {minimum:g}"
-        hi = f" and < {maximum:g}" if maximum is not None else ""
-        raise ParameterError(f"{name}: expected a finite number {lo}{hi}, got {value}", name)
-    return value
 
 
 def check_actuation(alpha: Any, name: str = "actuation") -> float:
@@ -84,7 +63,7 @@ def check_actuation(alpha: Any, name: str = "actuation") -> float:
         math.isfinite(float(alpha)) and float(alpha) > 0
     ):
         raise ParameterError(
-            f"{name}: expected a finite number > 0 (1 = rest length, < 1 = pulled), got {_describe(alpha)}",
+            f"{name}: expected a finite number > 0 (1 = rest length, < 1 = pulled), got {describe(alpha)}",
             name,
         )
     return float(alpha)
@@ -156,7 +135,7 @@ class Cable:
         try:
             pts = np.asarray(points, dtype=np.float64)
         except (TypeError, ValueError) as exc:
-            raise ShapeError(f"points: expected a (k, 3) array of numbers, got {_describe(points)} ({exc})") from None
+            raise ShapeError(f"points: expected a (k, 3) array of numbers, got {describe(points)} ({exc})") from None
         if pts.ndim != 2 or pts.shape[1] != 3:
             raise ShapeError(f"points: expected shape (k, 3), got shape {pts.shape}")
         if pts.shape[0] < 2:
@@ -172,21 +151,21 @@ class Cable:
                 "points",
             )
         if not isinstance(anchor_first, (bool, np.bool_)):
-            raise ParameterError(f"anchor_first: expected True or False, got {_describe(anchor_first)}", "anchor_first")
+            raise ParameterError(f"anchor_first: expected True or False, got {describe(anchor_first)}", "anchor_first")
         if not isinstance(outside, str) or outside not in OUTSIDE_MODES:
             raise ParameterError(f"outside: expected one of {list(OUTSIDE_MODES)}, got {outside!r}", "outside")
         pts.setflags(write=False)
         lengths.setflags(write=False)
         self._points = pts
         self._rest_lengths = lengths
-        self.stiffness = _real(stiffness, "stiffness", minimum=0.0, strict=True)
+        self.stiffness = real(stiffness, "stiffness", minimum=0.0, strict=True)
         self.actuation = check_actuation(actuation)
-        self.transition = _real(transition, "transition", minimum=0.0, strict=True, maximum=1.0)
+        self.transition = real(transition, "transition", minimum=0.0, strict=True, maximum=1.0)
         self.anchor_first = bool(anchor_first)
-        self.snap_tolerance = _real(snap_tolerance, "snap_tolerance", minimum=0.0, strict=False)
+        self.snap_tolerance = real(snap_tolerance, "snap_tolerance", minimum=0.0, strict=False)
         self.outside = outside
-        self.free_node_mass = _real(free_node_mass, "free_node_mass", minimum=0.0, strict=False)
-        self.damping = _real(damping, "damping", minimum=0.0, strict=False)
+        self.free_node_mass = real(free_node_mass, "free_node_mass", minimum=0.0, strict=False)
+        self.damping = real(damping, "damping", minimum=0.0, strict=False)
 
     @classmethod
     def line(
@@ -227,12 +206,12 @@ class Cable:
         except (TypeError, ValueError) as exc:
             raise ShapeError(f"start, direction: expected 3 numbers each ({exc})") from None
         if p0.shape != (3,) or not np.all(np.isfinite(p0)):
-            raise ShapeError(f"start: expected 3 finite numbers, got {_describe(start)}")
+            raise ShapeError(f"start: expected 3 finite numbers, got {describe(start)}")
         if d.shape != (3,) or not np.all(np.isfinite(d)) or not np.linalg.norm(d) > 0:
-            raise ParameterError(f"direction: expected a finite non-zero vector (3,), got {_describe(direction)}", "direction")
-        length = _real(length, "length", minimum=0.0, strict=True)
+            raise ParameterError(f"direction: expected a finite non-zero vector (3,), got {describe(direction)}", "direction")
+        length = real(length, "length", minimum=0.0, strict=True)
         if isinstance(divisions, bool) or not isinstance(divisions, numbers.Integral) or divisions < 1:
-            raise ParameterError(f"divisions: expected an integer >= 1, got {_describe(divisions)}", "divisions")
+            raise ParameterError(f"divisions: expected an integer >= 1, got {describe(divisions)}", "divisions")
         t = np.linspace(0.0, length, int(divisions) + 1)
         points = p0 + t[:, None] * (d / np.linalg.norm(d))
         return cls(points, stiffness, actuation, **options)
@@ -333,7 +312,14 @@ def placement_counts(placements: Sequence[CablePlacement]) -> dict[str, Any]:
     return counts
 
 
-def cable_index(body: "Body", cable: "Cable | int") -> int:
+class HasCables(Protocol):
+    """What :func:`cable_index` needs of a body (a :class:`sorofem.Body`)."""
+
+    @property
+    def cables(self) -> tuple[Cable, ...]: ...  # noqa: D102
+
+
+def cable_index(body: HasCables, cable: "Cable | int") -> int:
     """Index of ``cable`` (a :class:`Cable` added to ``body``, or an index) in ``body.cables``."""
     n = len(body.cables)
     if isinstance(cable, Cable):
@@ -342,115 +328,10 @@ def cable_index(body: "Body", cable: "Cable | int") -> int:
                 return i
         raise InputError("cable: this Cable has not been added to the body (use body.add_cable(cable) first)")
     if isinstance(cable, bool) or not isinstance(cable, numbers.Integral):
-        raise InputError(f"cable: expected a Cable or an integer index, got {_describe(cable)}")
+        raise InputError(f"cable: expected a Cable or an integer index, got {describe(cable)}")
     if not 0 <= int(cable) < n:
         raise InputError(f"cable: index {int(cable)} out of range: the body has {n} cable(s)")
     return int(cable)
-
-
-# ---------------------------------------------------------------------------
-# Quasi-static actuation
-
-
-def actuate(
-    body: "Body",
-    cable: "Cable | int",
-    alphas: float | Sequence[float],
-    gravity: ArrayLike = (0.0, 0.0, 0.0),
-    *,
-    max_step: float = DEFAULT_ALPHA_STEP,
-    initial: "ArrayLike | StaticResult | None" = None,
-    tolerance: float = 1e-8,
-    max_iterations: int = 50,
-) -> list["StaticResult"]:
-    """Pull (or release) a cable quasi-statically by continuation in its actuation alpha.
-
-    Each alpha of the path is solved with :func:`sorofem.solve_static`, warm-started from the
-    previous equilibrium. A step that does not converge is halved (up to
-    :data:`MAX_HALVINGS` times) and the intermediate equilibria are kept in the path.
-
-    Parameters
-    ----------
-    body
-        The body; ``cable`` must have been added to it.
-    cable
-        A :class:`Cable` of the body or its index.
-    alphas
-        The path: a sequence of alphas solved in turn, or a single target alpha, reached in
-        equal steps of at most ``max_step`` from the cable's current actuation.
-    gravity
-        ``(3,)``, m/s^2.
-    max_step
-        Largest alpha increment of a path built from a single target.
-    initial
-        Starting positions ``(n_nodes, 3)`` or a :class:`StaticResult` for the first solve
-        (default: the rest shape).
-    tolerance, max_iterations
-        Passed to :func:`sorofem.solve_static`.
-
-    Returns
-    -------
-    list of StaticResult
-        One per solved alpha (``result.actuations`` records them), the target last. The
-        body's actuation is left at the last alpha.
-
-    Raises
-    ------
-    ConvergenceError
-        A step failed even after halving; ``err.results`` holds the equilibria reached.
-
-    Examples
-    --------
-    >>> results = sf.actuate(body, cable, 0.5, gravity=(0, 0, -9.81))  # doctest: +SKIP
-    >>> results[-1].cable_tensions[0]                                  # doctest: +SKIP
-    """
-    from .model import StaticResult, solve_static
-
-    index = cable_index(body, cable)
-    if isinstance(alphas, numbers.Real) and not isinstance(alphas, bool):
-        target = check_actuation(alphas, "alphas")
-        step = _real(max_step, "max_step", minimum=0.0, strict=True)
-        start = body.actuations[index]
-        n = max(1, math.ceil(abs(target - start) / step - 1e-12))
-        path = [start + (target - start) * (i + 1) / n for i in range(n)]
-    else:
-        try:
-            path = [check_actuation(a, f"alphas[{i}]") for i, a in enumerate(alphas)]  # type: ignore[union-attr]
-        except TypeError:
-            raise ParameterError(f"alphas: expected a number or a sequence of numbers, got {_describe(alphas)}", "alphas") from None
-        if not path:
-            raise ParameterError("alphas: expected at least one alpha", "alphas")
-
-    results: list[StaticResult] = []
-    previous: Any = initial.positions if isinstance(initial, StaticResult) else initial
-    current = body.actuations[index]
-    for target in path:
-        halvings = 0
-        while True:
-            # Retry from the last equilibrium with half the increment until it converges.
-            trial = target if halvings == 0 else current + (target - current) / 2**halvings
-            body.set_actuation(index, trial)
-            try:
-                result = solve_static(
-                    body, gravity, tolerance=tolerance, max_iterations=max_iterations, initial=previous
-                )
-            except ConvergenceError as err:
-                halvings += 1
-                if halvings > MAX_HALVINGS:
-                    body.set_actuation(index, current)
-                    err.results = results  # type: ignore[attr-defined]
-                    raise ConvergenceError(
-                        f"actuate: no equilibrium at alpha = {trial:g} after halving the step from "
-                        f"alpha = {current:g} {MAX_HALVINGS} times: {err}",
-                        err.report,
-                    ) from err
-                continue
-            results.append(result)
-            previous, current = result.positions, trial
-            if trial == target:
-                break
-            halvings = max(0, halvings - 1)
-    return results
 
 
 def segment_tensions(
@@ -479,19 +360,20 @@ def segment_tensions(
     )
 
 
-def attached_rest_lengths(body: "Body", cable: "Cable | int") -> NDArray[np.float64]:
+def attached_rest_lengths(body: Any, cable: "Cable | int") -> NDArray[np.float64]:
     """Rest length of each segment as the solver sees it, ``(k - 1,)`` m: measured between the
-    material points the cable points are attached to (a snapped point sits on the mesh)."""
-    index = cable_index(body, cable)
-    return np.asarray(body._core_model().cable_rest_lengths()[index], dtype=np.float64)
+    material points the cable points are attached to (a snapped point sits on the mesh).
+    ``body`` is a :class:`sorofem.Body` (:meth:`sorofem.Body.attached_rest_lengths`)."""
+    return body.attached_rest_lengths(cable_index(body, cable))
 
 
 # ---------------------------------------------------------------------------
 # Output
 
 
-def write_cables(path: str | os.PathLike[str], result: "StaticResult") -> None:
-    """Write a result's cables as polylines (``.vtu``/``.vtk``, through meshio) for ParaView.
+def write_cables(path: str | os.PathLike[str], result: Any) -> None:
+    """Write a result's cables (a :class:`sorofem.StaticResult`'s ``cable_points`` and
+    ``cable_tensions``) as polylines (``.vtu``/``.vtk``, through meshio) for ParaView.
 
     Point data: ``cable`` (index). Cell data (one line cell per segment): ``tension`` (N) and
     ``cable``.

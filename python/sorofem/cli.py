@@ -12,7 +12,10 @@ Usage::
     sorofem --version
 
 ``run`` writes ``DIR/result.vtu``, ``DIR/summary.json``, ``DIR/shape.png`` and
-``DIR/convergence.png``. It only ever writes those names and never deletes anything.
+``DIR/convergence.png`` (and ``DIR/deformed.vtu`` with ``[output] deformed = true``). It only
+ever writes those names and never deletes anything. ``result.vtu`` holds the **rest** mesh with
+the point data ``displacement`` (the finite-element convention: ParaView's Warp By Vector on it
+shows the deformed body); ``deformed.vtu`` the same data on the deformed mesh.
 ``summary.json`` records, besides the solver report, the volume bookkeeping
 ``volume_change`` ((V_deformed - V_rest) / V_rest) and ``mean_log_j`` (sum V_e ln J_e / V),
 and for ``kind = "mixed"`` the pressure range ``min_pressure``/``max_pressure`` (Pa); the
@@ -35,7 +38,12 @@ write over a file the scene reads (the scene, its mesh, its ``[target]`` surface
 cables that bring ``[target]`` closest (:func:`sorofem.control`). Both use the scene's gravity
 and ``[solver]`` options (the Newton tolerance no looser than 1e-10) and write ``DIR/summary.json`` (estimate: the parameters, the material
 as (mu, lambda) and (E, nu), the residual, forward solves and history; control: actuation,
-distance, reachable, forward solves, history) and ``DIR/result.vtu`` (the final equilibrium).
+distance, reachable, forward solves, history), ``DIR/result.vtu`` (the final equilibrium) and
+``DIR/fit.png`` (goal against model points, misfit history). ``estimate`` prints each parameter
+with its standard error (rounded to it), says which ones ended on a bound (no standard error
+there: the covariance is that of the others, with them held), and, when the fit is poorly
+conditioned, profiles the misfit along the worst determined parameter (``summary.json``
+``profile``, ``DIR/profile.png``).
 An estimate that does not converge, or a control target that is not reachable, exits 3
 (the outputs are still written). They follow ``[output]`` ``directory``, ``summary`` and ``vtu``.
 
@@ -68,7 +76,18 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .errors import InputError, SolverError
+from ._text import plural
+from ._version import __version__
+from .cables import placement_counts, write_cables
+from .convert import run_command as convert_command
+from .errors import ConvergenceError, InputError, SolverError
+from .inverse import DEFAULT_TOLERANCE, control, estimate
+from .io import read_mesh, write_result
+from .plot import plot_convergence, plot_fit, plot_profile, plot_rest_and_deformed, plot_trajectory
+from .progress import default as progress_default
+from .scene import Scene, schema_text
+from .solver import SolveReport
+from .viewer import serve as view_command
 
 __all__ = ["main"]
 
@@ -93,15 +112,48 @@ class _Parser(argparse.ArgumentParser):
         raise _UsageError(f"{message} (see '{self.prog} --help')")
 
 
-def _version() -> str:
-    from . import __version__
+#: The epilog of ``sorofem --help``.
+EPILOG = """\
+examples:
+  sorofem run examples/scenes/cantilever.toml --out results/cantilever
+  sorofem run examples/scenes/dynamics.toml --out results/dynamics       # [dynamics]: a trajectory
+  sorofem estimate examples/scenes/estimate.toml --out results/estimate  # fit [estimate] to [target]
+  sorofem control examples/scenes/control.toml --out results/control     # cable actuations for [target]
+  sorofem info robot.msh --scale 1e-3                                    # mesh statistics and quality
+  sorofem convert robot.msh robot.vtu                                    # see 'sorofem convert --help'
+  sorofem schema --out scene.schema.json                                 # for editors
 
-    return __version__
+exit codes:
+  0    success
+  2    bad input: scene, mesh or arguments (one 'error: ...' line on stderr)
+  3    the solver failed, an estimate did not converge or a control target is not reachable
+       (summary.json is still written)
+  1    unexpected error (a bug: please report it with the traceback)
+  130  interrupted (Ctrl-C)
+
+documentation: docs/cli.md and docs/scene.md, or 'sorofem COMMAND --help'"""
+
+#: The epilog of ``sorofem convert --help``: what each output suffix writes.
+CONVERT_EPILOG = """\
+output formats (by the suffix of OUT):
+  .tet                 sorofem's text format (full float precision)
+  .msh                 Gmsh 4.1 ASCII
+  .node, .ele          TetGen (both STEM.node and STEM.ele are written)
+  .stl .obj .ply .off  the boundary surface (outward-oriented triangles)
+  .vtu .vtk .mesh ...  any other volume format meshio writes (the tetrahedra)
+
+input formats: .tet, Gmsh .msh (2.2, 4.x), TetGen .node/.ele, and any volume mesh meshio reads
+(.vtu, .vtk, .mesh, ...). A surface (.stl, .obj) is not a volume mesh: fill it with tetrahedra by
+sf.tetrahedralize or a scene's [mesh] surface = "robot.stl".
+
+example:
+  sorofem convert robot_mm.msh robot.vtu --scale 1e-3"""
 
 
 def _build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="sorofem", description="Simulate cable-driven silicone soft robots.")
-    parser.add_argument("--version", action="version", version=f"sorofem {_version()}")
+    parser = _Parser(prog="sorofem", description="Simulate, calibrate and control cable-driven silicone soft robots.",
+                     epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"sorofem {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
 
@@ -126,13 +178,15 @@ def _build_parser() -> argparse.ArgumentParser:
     info.add_argument("--scale", type=float, default=1.0, help="coordinate scale factor (default 1)")
     info.add_argument("--json", action="store_true", help="print as JSON")
 
-    convert = sub.add_parser("convert", help="convert a mesh file to another format (see sorofem.convert)")
+    convert = sub.add_parser("convert", help="convert a mesh file to another format (.tet, .msh, .node/.ele, .vtu, "
+                             ".stl, ...)", description="Convert a tetrahedral mesh to the format of OUT's suffix.",
+                             epilog=CONVERT_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     convert.add_argument("input", type=Path, metavar="IN", help="mesh file (.tet or any format meshio reads)")
     convert.add_argument("output", type=Path, metavar="OUT", help="output file; its suffix picks the format")
     convert.add_argument("--scale", type=float, default=1.0, help="coordinate scale factor (default 1)")
     convert.add_argument("--quiet", action="store_true", help="print nothing on success")
 
-    view = sub.add_parser("view", help="interactive 3-D view in the browser (needs sorofem[viewer])")
+    view = sub.add_parser("view", help="interactive 3-D view in the browser (extra 'viewer': pip install \".[viewer]\")")
     view.add_argument("scene", type=Path,
                       help="TOML scene file, or a .pvd / the --out folder of a dynamic run (played back)")
     view.add_argument("--trajectory", action="store_true", help="simulate the scene's [dynamics] and play it")
@@ -149,8 +203,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code (see the module docstring)."""
     try:
         args = _build_parser().parse_args(argv)
-        from .progress import default as progress_default
-
         # --quiet silences the progress line too; otherwise it shows only on a terminal.
         with progress_default(False if getattr(args, "quiet", False) else None):
             return _dispatch(args)
@@ -180,13 +232,9 @@ def _dispatch(args: argparse.Namespace) -> int:
     if args.command in ("estimate", "control"):
         return _inverse(args)
     if args.command == "convert":
-        from .convert import _cli as _convert
-
-        return _convert(args.input, args.output, args.scale, quiet=args.quiet)
+        return convert_command(args.input, args.output, args.scale, quiet=args.quiet)
     if args.command == "view":
-        from .viewer import _cli as _view
-
-        return _view(args.scene, host=args.host, port=args.port, trajectory=args.trajectory)
+        return view_command(args.scene, host=args.host, port=args.port, trajectory=args.trajectory)
     if args.command == "schema":
         return _schema(args)
     return _info(args)
@@ -243,8 +291,8 @@ def _selected_outputs(scene: Any) -> list[str]:
         names = DYNAMICS_OUTPUT_NAMES
     else:
         wanted = {"result.vtu": "vtu", "summary.json": "summary", "shape.png": "png", "convergence.png": "png",
-                  "cables.vtu": "cables"}
-        names = OUTPUT_NAMES + (CABLE_OUTPUT_NAMES if scene.cables else ())
+                  "cables.vtu": "cables", "deformed.vtu": "deformed"}
+        names = OUTPUT_NAMES + (CABLE_OUTPUT_NAMES if scene.cables else ()) + ("deformed.vtu",)
     return [name for name in names if switches[wanted[name]]]
 
 
@@ -280,12 +328,6 @@ def _wrote(outputs: dict[str, Path], out: Path, extra: str = "") -> str:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from .errors import ConvergenceError
-    from .io import write_result
-    from .model import SolveReport
-    from .plot import plot_convergence, plot_rest_and_deformed
-    from .scene import Scene
-
     scene = Scene.load(args.scene)
     out, label = _output_folder(args, scene)
     outputs = {name: out / name for name in _selected_outputs(scene)}
@@ -301,7 +343,7 @@ def _run(args: argparse.Namespace) -> int:
         "formulation_options": scene.body.formulation_options,
         "material": scene.material.to_dict(),
         "gravity": scene.gravity.tolist(),
-        "solver_options": dict(scene.solver),
+        "solver_options": scene.solve_options.to_dict(),
     }
     if scene.dynamics is not None:
         return _run_dynamics(args, scene, outputs, base, out)
@@ -310,7 +352,7 @@ def _run(args: argparse.Namespace) -> int:
     except SolverError as exc:
         # Still leave a summary behind: it is what a user (or a script) inspects first.
         raw = getattr(exc, "report", None)
-        report = raw if isinstance(raw, SolveReport) else SolveReport.from_dict(raw or {})
+        report = raw if isinstance(raw, SolveReport) else SolveReport.from_dict(raw or {}, scene.formulation)
         summary = {
             **base,
             "converged": False,
@@ -323,7 +365,7 @@ def _run(args: argparse.Namespace) -> int:
         }
         text = _write_summary(outputs, summary)
         if report.residual_history and "convergence.png" in outputs:
-            plot_convergence(report, outputs["convergence.png"], tolerance=scene.solver["tolerance"])
+            plot_convergence(report, outputs["convergence.png"], tolerance=scene.solve_options.tolerance)
         if args.json:
             sys.stdout.write(text)
         what = "did not converge" if isinstance(exc, ConvergenceError) else "failed"
@@ -333,9 +375,9 @@ def _run(args: argparse.Namespace) -> int:
     summary = {**base, **result.to_dict()}
     if "result.vtu" in outputs:
         write_result(outputs["result.vtu"], result)
+    if "deformed.vtu" in outputs:
+        write_result(outputs["deformed.vtu"], result, points="deformed")
     if "cables.vtu" in outputs:
-        from .cables import write_cables
-
         write_cables(outputs["cables.vtu"], result)
     text = _write_summary(outputs, summary)
     if "shape.png" in outputs:
@@ -344,7 +386,7 @@ def _run(args: argparse.Namespace) -> int:
         plot_rest_and_deformed(result, outputs["shape.png"], color_by=color_by,
                                title=f"{scene.path.name}: max |u| = {result.max_displacement:.3g} m{field}")
     if "convergence.png" in outputs:
-        plot_convergence(result.report, outputs["convergence.png"], tolerance=scene.solver["tolerance"])
+        plot_convergence(result.report, outputs["convergence.png"], tolerance=scene.solve_options.tolerance)
 
     if args.json:
         sys.stdout.write(text)
@@ -368,9 +410,6 @@ def _run_dynamics(
     args: argparse.Namespace, scene: Any, outputs: dict[str, Path], base: dict[str, Any], out: Path
 ) -> int:
     """``run`` for a scene with ``[dynamics]``: trajectory.pvd + frames, summary.json, trajectory.png."""
-    from .cables import placement_counts
-    from .plot import plot_trajectory
-
     base = {**base, "dynamics": scene.to_dict()["dynamics"]}
     if scene.cables:
         base["cables"] = [
@@ -401,8 +440,9 @@ def _run_dynamics(
     elif not args.quiet:
         print(f"{scene.path.name}: {scene.mesh.n_nodes} nodes, {scene.mesh.n_tets} tets, {scene.formulation}, "
               f"{len(scene.cables)} cable(s)")
-        print(f"{summary['steps']} steps of {summary['dt']:g} s: {summary['newton_iterations']} Newton iterations "
-              f"(max {summary['max_iterations_per_step']} per step), {summary['cutbacks']} cutbacks, "
+        print(f"{plural(summary['steps'], 'step')} of {summary['dt']:g} s: "
+              f"{plural(summary['newton_iterations'], 'Newton iteration')} "
+              f"(max {summary['max_iterations_per_step']} per step), {plural(summary['cutbacks'], 'cutback')}, "
               f"{summary['timings']['simulate']:.3g} s")
         print(f"final kinetic energy {summary['final_kinetic_energy']:.3e} J (max {summary['max_kinetic_energy']:.3e} J), "
               f"max displacement {summary['max_displacement']:.6g} m")
@@ -417,12 +457,6 @@ def _run_dynamics(
 
 def _inverse(args: argparse.Namespace) -> int:
     """``estimate`` / ``control``: summary.json and result.vtu in ``--out``."""
-    import sorofem as sf
-
-    from .inverse import DEFAULT_TOLERANCE
-    from .io import write_result
-    from .scene import Scene
-
     command = args.command
     scene = Scene.load(args.scene)
     section = getattr(scene, command)
@@ -431,12 +465,11 @@ def _inverse(args: argparse.Namespace) -> int:
     if section is None:
         raise InputError(f"{scene.path}: '{command}' needs an [{command}] table")
     out, label = _output_folder(args, scene)
-    switches = {"summary.json": scene.output["summary"], "result.vtu": scene.output["vtu"]}
+    switches = {"summary.json": scene.output["summary"], "result.vtu": scene.output["vtu"], "fit.png": scene.output["png"]}
     outputs = {name: out / name for name, on in switches.items() if on}
     _refuse_inputs(outputs, scene, label)
-    solve = scene.solver
     # Sensitivities are only as accurate as the equilibria: never looser than the inverse default.
-    tolerance = min(solve["tolerance"], DEFAULT_TOLERANCE)
+    options = scene.solve_options.replace(tolerance=min(scene.solve_options.tolerance, DEFAULT_TOLERANCE))
     base = {
         "scene": str(scene.path),
         "command": command,
@@ -444,41 +477,38 @@ def _inverse(args: argparse.Namespace) -> int:
         "n_tets": scene.mesh.n_tets,
         "formulation": scene.formulation,
         "gravity": scene.gravity.tolist(),
-        "solver_options": dict(solve),
+        "solver_options": scene.solve_options.to_dict(),
         "options": dict(section),
     }
     if command == "estimate":
-        fit = sf.estimate(
+        fit = estimate(
             scene.body, scene.target, section["params"], section["x0"], bounds=section["bounds"],
             method=section["method"], starts=section["starts"], regions=scene.regions or None,
-            gravity=scene.gravity, tolerance=tolerance,
-            max_iterations=solve["max_iterations"], load_steps=solve["load_steps"],
+            gravity=scene.gravity, options=options,
         )
         m = fit.material
         summary = {
             **base,
             **fit.to_dict(),
             "converged": fit.converged,
-            "shear_modulus": m.shear_modulus, "lame_lambda": m.lame_lambda,
-            "youngs_modulus": m.youngs_modulus, "poisson_ratio": m.poisson_ratio,
+            # Every parameter of the model, in each of its forms (mu, lambda and E, nu).
+            **{name: m.value(name) for form in m.model.forms for name in form.names},
             "residual": fit.residual,
             "history": fit.history,
         }
-        ok, result = fit.converged, fit.result
-        lines = [
-            f"{scene.path.name}: fitted {', '.join(section['params'])} ({section['method']})",
-            f"mu {_fmt(m.shear_modulus)} Pa, lambda {_fmt(m.lame_lambda)} Pa; "
-            f"E {_fmt(m.youngs_modulus)} Pa, nu {_fmt(m.poisson_ratio)}",
-            f"residual {fit.residual:.3e} m (rms), {fit.forward_solves} forward solves, {fit.message}",
-        ]
+        ok, result, fitted = fit.converged, fit.result, fit
+        lines = [f"{scene.path.name}: {fit.summary()}"]
+        if fit.profile is not None and "fit.png" in outputs:
+            outputs["profile.png"] = out / "profile.png"
+            _refuse_inputs({"profile.png": outputs["profile.png"]}, scene, label)
         failure = f"the fit did not converge: {fit.message}"
     else:
-        ctl = sf.control(
+        ctl = control(
             scene.body, scene.target, cables=section["cables"], bounds=section["bounds"], method=section["method"],
-            gravity=scene.gravity, solve_tolerance=tolerance, max_iterations=solve["max_iterations"], load_steps=solve["load_steps"],
+            gravity=scene.gravity, options=options,
         )
         summary = {**base, **ctl.to_dict(), "history": ctl.history, "converged": ctl.reachable}
-        ok, result = ctl.reachable, ctl.result
+        ok, result, fitted = ctl.reachable, ctl.result, ctl
         lines = [
             f"{scene.path.name}: actuation {', '.join(f'{a:.6g}' for a in ctl.actuation)} "
             f"of cable(s) {section['cables']} ({section['method']})",
@@ -490,6 +520,10 @@ def _inverse(args: argparse.Namespace) -> int:
         out.mkdir(parents=True, exist_ok=True)
     if result is not None and "result.vtu" in outputs:
         write_result(outputs["result.vtu"], result)
+    if "fit.png" in outputs:
+        plot_fit(fitted, outputs["fit.png"])
+    if "profile.png" in outputs:
+        plot_profile(fitted, outputs["profile.png"])
     text = _write_summary(outputs, summary)
     if args.json:
         sys.stdout.write(text)
@@ -502,10 +536,6 @@ def _inverse(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _fmt(value: Any) -> str:
-    return f"{value:.6g}" if np.ndim(value) == 0 else f"{np.min(value):.6g}..{np.max(value):.6g}"
-
-
 # ---------------------------------------------------------------------------
 # schema
 
@@ -513,9 +543,7 @@ def _fmt(value: Any) -> str:
 def _schema(args: argparse.Namespace) -> int:
     """``schema``: the scene files' JSON Schema on stdout, or in ``--out FILE`` (never overwritten
     without ``--force``)."""
-    from .scene import _schema_text
-
-    text = _schema_text()
+    text = schema_text()
     out: Path | None = args.out
     if out is None:
         if args.force:
@@ -557,10 +585,8 @@ def tet_quality(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
 
 
 def _info(args: argparse.Namespace) -> int:
-    from .io import read_mesh
-
     mesh = read_mesh(args.mesh, scale=args.scale)
-    lo, hi = mesh.bounds()
+    lo, hi = mesh.bounds
     vol = mesh.volumes
     quality = tet_quality(mesh.points, mesh.tets)
     data = {

@@ -24,7 +24,7 @@ Examples
 >>> from sorofem.convert import convert
 >>> sf.Mesh.box(size=(400, 100, 100), cells=(4, 1, 1)).write("/tmp/beam_mm.tet")
 >>> mesh = convert("/tmp/beam_mm.tet", "/tmp/beam.msh", scale=1e-3)
->>> sf.Mesh.read("/tmp/beam.msh").bounds()[1].tolist()
+>>> sf.Mesh.read("/tmp/beam.msh").bounds[1].tolist()
 [0.4, 0.1, 0.1]
 """
 
@@ -32,15 +32,13 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ._formats import same_file
 from .errors import InputError
-from .io import _same_file, read_mesh, write_mesh
-
-if TYPE_CHECKING:
-    from .model import Mesh
+from .io import read_mesh, write_mesh
+from .mesh import Mesh
 
 __all__ = ["convert", "SURFACE_SUFFIXES", "TETGEN_SUFFIXES"]
 
@@ -59,7 +57,7 @@ def _files_of(path: Path) -> list[Path]:
     return [path]
 
 
-def convert(source: PathLike, target: PathLike, scale: float = 1.0) -> "Mesh":
+def convert(source: PathLike, target: PathLike, scale: float = 1.0) -> Mesh:
     """Read the mesh ``source`` and write it to ``target`` in the format of its suffix.
 
     Parameters
@@ -94,7 +92,7 @@ def convert(source: PathLike, target: PathLike, scale: float = 1.0) -> "Mesh":
     source, target = Path(source), Path(target)
     for written in _files_of(target):
         for read in _files_of(source):
-            if _same_file(written, read):
+            if same_file(written, read):
                 raise InputError(
                     f"refusing to overwrite the input file {read} (converting {source} to {target}); "
                     "choose another output name"
@@ -131,8 +129,9 @@ def convert(source: PathLike, target: PathLike, scale: float = 1.0) -> "Mesh":
     return mesh
 
 
-def _cli(source: Path, target: Path, scale: float, quiet: bool = False) -> int:
-    """``sorofem convert``: returns the exit code 0 (errors propagate to :func:`sorofem.cli.main`)."""
+def run_command(source: Path, target: Path, scale: float, quiet: bool = False) -> int:
+    """``sorofem convert``: convert and print what was written; returns the exit code 0 (errors
+    propagate to :func:`sorofem.cli.main`)."""
     mesh = convert(source, target, scale=scale)
     if not quiet:
         written = ", ".join(str(p) for p in _files_of(target))
@@ -140,3 +139,6 @@ def _cli(source: Path, target: Path, scale: float, quiet: bool = False) -> int:
         print(f"wrote {written}: {what}{mesh.n_nodes} nodes, {mesh.n_tets} tets (scale {scale:g})")
     return 0
 
+
+#: Old private name of :func:`run_command`.
+_cli = run_command

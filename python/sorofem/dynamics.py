@@ -27,46 +27,28 @@ Examples
 
 from __future__ import annotations
 
-import math
 import numbers
 import os
 import re
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._deprecated import moved
+from ._text import plural
+from ._validate import as_finite, describe, non_negative, positive_int, positive_scalar
+from .body import Body
+from .cables import attached_rest_lengths, cable_index, segment_tensions
 from .errors import ConvergenceError, InputError, ParameterError, ShapeError
 from .progress import Progress
+from .solver import SolveReport
+from .static import StaticResult
 
-if TYPE_CHECKING:
-    from .model import Body, StaticResult
-
-__all__ = ["Keyframes", "Trajectory", "simulate", "evaluate_schedule", "has_dynamics"]
-
-
-def has_dynamics() -> bool:
-    """Whether the compiled extension provides time stepping (``_core.Model.simulate``)."""
-    from .model import _core
-
-    return _core is not None and hasattr(_core.Model, "simulate")
-
-
-def _describe(value: Any) -> str:
-    if isinstance(value, np.ndarray):
-        return f"an array of shape {value.shape} and dtype {value.dtype}"
-    return f"{type(value).__name__} {value!r}"
-
-
-def _nonneg(value: Any, name: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not (
-        math.isfinite(float(value)) and float(value) >= 0
-    ):
-        raise ParameterError(f"{name}: expected a finite number >= 0, got {_describe(value)}", name)
-    return float(value)
+__all__ = ["Keyframes", "Trajectory", "simulate", "evaluate_schedule"]
 
 
 class Keyframes:
@@ -90,7 +72,7 @@ class Keyframes:
         try:
             arr = np.asarray(points, dtype=np.float64)
         except (TypeError, ValueError):
-            raise ShapeError(f"keyframes: expected [[time, value], ...], got {_describe(points)}") from None
+            raise ShapeError(f"keyframes: expected [[time, value], ...], got {describe(points)}") from None
         if arr.ndim != 2 or arr.shape[1] != 2 or arr.shape[0] < 1:
             raise ShapeError(f"keyframes: expected shape (k, 2) with k >= 1, got shape {arr.shape}")
         if not np.all(np.isfinite(arr)):
@@ -119,7 +101,7 @@ def _alpha_column(entry: Any, times: NDArray[np.float64], current: float, name: 
         for t in times:
             value = entry(float(t))
             if isinstance(value, bool) or not isinstance(value, numbers.Real):
-                raise ParameterError(f"{name}: the schedule returned {_describe(value)} at t = {t:g} s; expected a number", name)
+                raise ParameterError(f"{name}: the schedule returned {describe(value)} at t = {t:g} s; expected a number", name)
             values.append(float(value))
         return np.array(values)
     arr = np.asarray(entry, dtype=np.float64)
@@ -129,7 +111,7 @@ def _alpha_column(entry: Any, times: NDArray[np.float64], current: float, name: 
 
 
 def evaluate_schedule(
-    body: "Body", schedule: Any, dt: float, steps: int
+    body: Body, schedule: Any, dt: float, steps: int
 ) -> NDArray[np.float64]:
     """Evaluate an actuation schedule into the ``(steps, n_cables)`` array of alphas.
 
@@ -149,8 +131,6 @@ def evaluate_schedule(
     --------
     >>> alphas = sf.dynamics.evaluate_schedule(body, lambda t: 1 - 0.4 * min(t, 1), 0.1, 20)  # doctest: +SKIP
     """
-    from .cables import cable_index
-
     n_cables = len(body.cables)
     current = body.actuations
     times = dt * np.arange(1, steps + 1)
@@ -184,7 +164,7 @@ def evaluate_schedule(
             try:
                 out = np.array(values, dtype=np.float64)
             except (TypeError, ValueError):
-                raise ParameterError(f"actuation: the schedule returned {_describe(values[0])}; expected numbers", "actuation") from None
+                raise ParameterError(f"actuation: the schedule returned {describe(values[0])}; expected numbers", "actuation") from None
             if out.shape != (steps, n_cables):
                 raise ShapeError(f"actuation: the schedule must return {n_cables} alphas (one per cable), got shape {out.shape[1:]}")
     elif isinstance(schedule, Sequence) and not isinstance(schedule, str):
@@ -194,7 +174,7 @@ def evaluate_schedule(
         for c, entry in enumerate(schedule):
             out[:, c] = _alpha_column(entry, times, current[c], f"actuation[{c}]")
     else:
-        raise InputError(f"actuation: expected None, a callable, a sequence or a dict, got {_describe(schedule)}")
+        raise InputError(f"actuation: expected None, a callable, a sequence or a dict, got {describe(schedule)}")
     bad = ~(np.isfinite(out) & (out > 0))
     if np.any(bad):
         s, c = (int(i) for i in np.argwhere(bad)[0])
@@ -234,7 +214,7 @@ class Trajectory:
         ``{"simulate": s}``: wall-clock time of the integration.
     """
 
-    def __init__(self, body: "Body", dt: float, out: Mapping[str, Any], actuation: NDArray[np.float64], elapsed: float) -> None:
+    def __init__(self, body: Body, dt: float, out: Mapping[str, Any], actuation: NDArray[np.float64], elapsed: float) -> None:
         self.body = body
         self.mesh = body.mesh
         self.dt = dt
@@ -246,7 +226,8 @@ class Trajectory:
         self.cutbacks = int(out.get("cutbacks", 0))
         self.cable_points = [[np.asarray(p, dtype=np.float64) for p in frame] for frame in out.get("cable_points", [])]
         self.actuation = actuation
-        self._initial_actuation = np.asarray(body.actuations, dtype=np.float64)
+        #: The cables' alphas before the first step, ``(n_cables,)``.
+        self.initial_actuation = np.asarray(body.actuations, dtype=np.float64)
         self.timings = {"simulate": elapsed}
 
     @property
@@ -266,11 +247,9 @@ class Trajectory:
     def cable_tensions(self, frame: int = -1) -> list[NDArray[np.float64]]:
         """Tension of every segment at a saved frame, one ``(k - 1,)`` array per cable (N),
         from the frame's cable points and the alphas of the step that produced it."""
-        from .cables import attached_rest_lengths, segment_tensions
-
         frame = range(self.n_frames)[frame]
         step = int(round(self.times[frame] / self.dt)) - 1
-        alphas = self.actuation[step] if step >= 0 else self._initial_actuation
+        alphas = self.actuation[step] if step >= 0 else self.initial_actuation
         return [
             segment_tensions(cable, self.cable_points[frame][c], float(alphas[c]), attached_rest_lengths(self.body, c))
             for c, cable in enumerate(self.body.cables)
@@ -289,7 +268,7 @@ class Trajectory:
         directory = Path(directory)
         frames_dir = directory / name
         frames_dir.mkdir(parents=True, exist_ok=True)
-        model = self.body._core_model()
+        model = self.body.core_model()
         tets = self.mesh.tets
         rest_cables = [c.points for c in self.body.cables]
         lines = None
@@ -352,7 +331,7 @@ class Trajectory:
 
 
 def simulate(
-    body: "Body",
+    body: Body,
     dt: float,
     steps: int,
     actuation: Any = None,
@@ -419,26 +398,18 @@ def simulate(
     ...                    gravity=(0, 0, -9.81), damping=(2.0, 0.01))
     >>> traj.write_pvd("results/pull")                                   # doctest: +SKIP
     """
-    from .model import (
-        Body,
-        StaticResult,
-        _as_finite,
-        _positive_int,
-        _positive_scalar,
-    )
-
     if not isinstance(body, Body):
-        raise InputError(f"body: expected a sorofem.Body, got {_describe(body)}")
-    dt = _positive_scalar(dt, "dt")
-    steps = _positive_int(steps, "steps")
-    save_every = _positive_int(save_every, "save_every")
-    tol = _positive_scalar(tolerance, "tolerance")
-    iters = _positive_int(max_iterations, "max_iterations")
-    g = _as_finite(gravity, "gravity", (3,))
+        raise InputError(f"body: expected a sorofem.Body, got {describe(body)}")
+    dt = positive_scalar(dt, "dt")
+    steps = positive_int(steps, "steps")
+    save_every = positive_int(save_every, "save_every")
+    tol = positive_scalar(tolerance, "tolerance")
+    iters = positive_int(max_iterations, "max_iterations")
+    g = as_finite(gravity, "gravity", (3,))
     if not isinstance(damping, (tuple, list)) or len(damping) != 2:
-        raise ParameterError(f"damping: expected (alpha_M, beta_K), got {_describe(damping)}", "damping")
-    mass_damping = _nonneg(damping[0], "damping[0] (alpha_M)")
-    stiffness_damping = _nonneg(damping[1], "damping[1] (beta_K)")
+        raise ParameterError(f"damping: expected (alpha_M, beta_K), got {describe(damping)}", "damping")
+    mass_damping = non_negative(damping[0], "damping[0] (alpha_M)")
+    stiffness_damping = non_negative(damping[1], "damping[1] (beta_K)")
     _, _, rho = body.material.per_element(body.mesh.n_tets)
     if not np.all(rho > 0):
         raise ParameterError(
@@ -454,23 +425,18 @@ def simulate(
         x0 = initial.positions
     else:
         x0 = initial
-    x0 = None if x0 is None else _as_finite(x0, "initial", (n, 3))
+    x0 = None if x0 is None else as_finite(x0, "initial", (n, 3))
     if initial_velocity is not None:
-        v0 = _as_finite(initial_velocity, "initial_velocity", (n, 3))
+        v0 = as_finite(initial_velocity, "initial_velocity", (n, 3))
     alphas = evaluate_schedule(body, actuation, dt, steps)
 
-    if not has_dynamics():
-        raise NotImplementedError(
-            "this build of the extension has no time stepping (sorofem._core.Model.simulate); "
-            "rebuild it with `make build`"
-        )
-    model = body._core_model()
-    model.set_material(*body.material.per_element(body.mesh.n_tets))
+    model = body.core_model()
+    forces, prescribed = body.forces, body.prescribed_displacement
     start = time.perf_counter()
 
     def run(n: int, a: NDArray[np.float64], x: Any, v: Any, every: int) -> dict[str, Any]:
         return model.simulate(
-            g, body._forces.copy(), body._prescribed.copy(), dt, n, a,
+            g, forces.copy(), prescribed.copy(), dt, n, a,
             mass_damping, stiffness_damping, x, v, tol, iters, every,
         )
 
@@ -486,9 +452,7 @@ def simulate(
             out = _run_in_chunks(run, steps, save_every, alphas, x0, v0, dt, bar)
     except ConvergenceError as err:
         if isinstance(err.report, dict):
-            from .model import SolveReport
-
-            err.report = SolveReport.from_dict(err.report)
+            err.report = SolveReport.from_dict(err.report, body.formulation)
         raise
     finally:
         bar.close()
@@ -498,7 +462,7 @@ def simulate(
     return Trajectory(body, dt, out, alphas, time.perf_counter() - start)
 
 
-def _has_free_cable_nodes(body: "Body") -> bool:
+def _has_free_cable_nodes(body: Body) -> bool:
     if not any(getattr(c, "outside", "error") == "free" for c in body.cables):
         return False
     try:
@@ -514,7 +478,7 @@ def _step_postfix(out: Mapping[str, Any], done: int, dt: float) -> str:
 
 
 def _postfix(t: float, per_step: float, cutbacks: int) -> str:
-    return f"t={t:.4g} s, {per_step:.1f} it/step, {cutbacks} cutbacks"
+    return f"t={t:.4g} s, {per_step:.1f} it/step, {plural(cutbacks, 'cutback')}"
 
 
 #: Wall-clock target of one chunk of steps while a progress line is shown, s.
@@ -595,3 +559,10 @@ def _shift_step_in_message(err: ConvergenceError, first_step: int, t_offset: flo
         err.args = (_STEP_IN_MESSAGE.sub(shift, err.args[0]), *err.args[1:])
     if isinstance(err.report, dict) and isinstance(err.report.get("message"), str):
         err.report["message"] = _STEP_IN_MESSAGE.sub(shift, err.report["message"])
+
+
+def _has_dynamics() -> bool:
+    return True
+
+
+__getattr__ = moved(__name__, {"has_dynamics": (lambda: _has_dynamics, "nothing: every build has time stepping")})

@@ -33,6 +33,10 @@ files without physical groups have no tags (the elementary entity numbers are no
 
 Writers never overwrite the file a mesh was read from.
 
+**Surfaces.** :func:`read_surface` reads triangle surfaces (OBJ with its own reader, ``.stl``,
+``.ply``, ``.off`` and the rest through meshio) for :meth:`sorofem.Target.surface` and
+:func:`sorofem.tetrahedralize`.
+
 Examples
 --------
 >>> import sorofem as sf
@@ -44,50 +48,39 @@ Examples
 
 from __future__ import annotations
 
-import numbers
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Mapping
+from typing import Any, Mapping, Protocol
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
-from .errors import InputError, MeshError, ParameterError
+from ._formats import CELL_TAG_KEYS, Surface, meshio_read, read_surface, refuse_overwrite
+from .errors import InputError
+from .mesh import Mesh
 
-if TYPE_CHECKING:
-    from .model import Mesh, StaticResult
-
-__all__ = ["read_mesh", "write_mesh", "write_result", "CELL_TAG_KEYS"]
+__all__ = ["read_mesh", "write_mesh", "write_result", "result_mesh", "read_points", "read_surface", "Surface",
+           "CELL_TAG_KEYS", "meshio_read"]
 
 PathLike = str | os.PathLike[str]
 
-#: meshio cell-data names of per-tetrahedron integer tags, in the order they are looked for:
-#: the first one present becomes :attr:`sorofem.Mesh.cell_tags`.
-CELL_TAG_KEYS = ("gmsh:physical", "tetgen:ref", "medit:ref")
-#: Volume cells meshio may report besides ``tetra`` (used when meshio does not say).
-_VOLUME_CELLS = ("tetra10", "hexahedron", "hexahedron20", "hexahedron24", "hexahedron27", "wedge", "wedge12",
-                 "wedge15", "wedge18", "pyramid", "pyramid13", "pyramid14")
+
+class ResultLike(Protocol):
+    """What :func:`write_result` reads of a result (a :class:`sorofem.StaticResult`)."""
+
+    mesh: Mesh
+    positions: NDArray[np.float64]
+    displacement: NDArray[np.float64]
+    pressure: NDArray[np.float64] | None
+
+    @property
+    def J(self) -> NDArray[np.float64]: ...  # noqa: N802, D102
+
+    @property
+    def von_mises(self) -> NDArray[np.float64]: ...  # noqa: D102
 
 
-def _same_file(a: Path, b: Path | None) -> bool:
-    if b is None:
-        return False
-    try:
-        if a.exists() and b.exists():
-            return os.path.samefile(a, b)
-    except OSError:
-        pass
-    return a.resolve() == b.resolve()
-
-
-def _refuse_overwrite(path: Path, source: Path | None) -> None:
-    if _same_file(path, source):
-        raise InputError(
-            f"refusing to overwrite the input mesh file {source}; write to another path"
-        )
-
-
-def read_mesh(path: PathLike, scale: float = 1.0) -> "Mesh":
+def read_mesh(path: PathLike, scale: float = 1.0) -> Mesh:
     """Read a tetrahedral mesh.
 
     Parameters
@@ -120,183 +113,99 @@ def read_mesh(path: PathLike, scale: float = 1.0) -> "Mesh":
     --------
     >>> mesh = sf.io.read_mesh("box2.tet", scale=1.0)  # doctest: +SKIP
     """
-    from .model import Mesh
-
-    path = Path(path)
-    if isinstance(scale, bool) or not isinstance(scale, numbers.Real) or not (0 < scale < float("inf")):
-        raise ParameterError(f"scale: expected a finite positive number, got {scale!r}", "scale")
-    if not path.is_file():
-        raise FileNotFoundError(f"mesh file not found: {path}")
-    tags = None
-    if path.suffix.lower() == ".tet":
-        points, tets = _read_tet(path)
-    else:
-        if path.suffix in (".node", ".ele"):  # meshio reads the TetGen pair from either name
-            other = path.with_suffix(".ele" if path.suffix == ".node" else ".node")
-            if not other.is_file():
-                raise FileNotFoundError(f"mesh file not found: {other} (the TetGen companion of {path})")
-        points, tets, tags = _read_meshio(path)
-    try:
-        mesh = Mesh(points * float(scale), tets)
-    except MeshError as exc:
-        raise MeshError(f"{path}: {exc}") from None
-    mesh.source = path
-    if tags is not None:
-        tags.setflags(write=False)
-        mesh.cell_tags = tags
-    return mesh
+    return Mesh.read(path, scale=scale)
 
 
-def _read_tet(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    points: list[list[float]] = []
-    tets: list[list[int]] = []
-    with path.open("r", encoding="utf-8", errors="replace") as fh:
-        for lineno, raw in enumerate(fh, start=1):
-            line = raw.split("#", 1)[0].strip()
-            if not line:
-                continue
-            parts = line.split()
-            tag = parts[0]
-            try:
-                if tag == "v" and len(parts) == 4:
-                    points.append([float(p) for p in parts[1:]])
-                    continue
-                if tag == "t" and len(parts) == 5:
-                    tets.append([int(p) for p in parts[1:]])
-                    continue
-            except ValueError:
-                pass
-            raise MeshError(
-                f"{path}, line {lineno}: expected 'v x y z' (three numbers) or 't i j k l' "
-                f"(four integer indices), got {raw.strip()!r}"
-            )
-    if not tets:
-        raise MeshError(f"{path}: no tetrahedra ('t i j k l' lines) found")
-    return np.array(points, dtype=np.float64).reshape(-1, 3), np.array(tets, dtype=np.int64)
-
-
-def _volume_types(types: set[str]) -> list[str]:
-    """The cell types among ``types`` that are 3-D but not linear tetrahedra."""
-    try:
-        from meshio._mesh import topological_dimension as dims
-    except ImportError:  # a meshio without the table: the common ones
-        dims = {t: 3 for t in _VOLUME_CELLS}
-    return sorted(t for t in types if t != "tetra" and dims.get(t) == 3)
-
-
-def meshio_read(path: str | os.PathLike[str], what: str) -> Any:
-    """``meshio.read(path)``, with any failure as a :class:`MeshError` naming the file and
-    ``what`` it should hold ("mesh", "surface"). meshio prints the error of every reader it
-    tries (for .msh: ANSYS before Gmsh) to stdout, which would corrupt `sorofem info --json`;
-    that text goes into the error message instead."""
-    import contextlib
-    import io as _io
-
-    import meshio
-
-    tried = _io.StringIO()
-    try:
-        with contextlib.redirect_stdout(tried):
-            return meshio.read(path)
-    except Exception as exc:  # meshio raises many types (ReadError, KeyError, ...)
-        detail = " ".join(tried.getvalue().split())
-        raise MeshError(
-            f"{path}: could not read the {what} with meshio: {exc}" + (f" ({detail})" if detail else "")
-        ) from None
-
-
-def _read_meshio(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """Points, tets and per-tet tags (or None) of a file meshio reads."""
-    m = meshio_read(path, "mesh")
-    volume = _volume_types({c.type for c in m.cells})
-    if volume:
-        counts = ", ".join(f"{sum(len(c.data) for c in m.cells if c.type == t)} {t}" for t in volume)
-        hint = (" (second-order tetrahedra: mesh with element order 1, e.g. `gmsh -3 -order 1`)"
-                if "tetra10" in volume else " (mesh the volume with tetrahedra only)")
-        raise MeshError(
-            f"{path}: the mesh has volume cells that are not linear tetrahedra ({counts}); sorofem uses linear "
-            f"tetrahedra ('tetra') only and will not leave part of the body out{hint}"
-        )
-    tetra = [i for i, c in enumerate(m.cells) if c.type == "tetra"]
-    blocks = [np.asarray(m.cells[i].data, dtype=np.int64) for i in tetra]
-    if not blocks:
-        found = sorted({c.type for c in m.cells}) or ["none"]
-        raise MeshError(
-            f"{path}: no linear tetrahedra ('tetra' cells) found; cell types in the file: {', '.join(found)}"
-        )
-    tets = np.concatenate(blocks)
-    points = np.asarray(m.points, dtype=np.float64)
-    if points.ndim == 2 and points.shape[1] == 2:
-        raise MeshError(f"{path}: the mesh is 2-D; sorofem needs 3-D coordinates")
-    if tets.size and (tets.min() < 0 or tets.max() >= len(points)):
-        raise MeshError(f"{path}: tetra node indices out of range [0, {len(points)})")
-    used = np.unique(tets)
-    if used.size != len(points):
-        remap = np.full(len(points), -1, dtype=np.int64)
-        remap[used] = np.arange(used.size)
-        points, tets = points[used], remap[tets]
-    return points, tets, _cell_tags(m, tetra, len(tets))
-
-
-def _cell_tags(m: object, tetra: list[int], n_tets: int) -> np.ndarray | None:
-    """The first of CELL_TAG_KEYS that gives every tetrahedron an integer, as int64."""
-    cell_data = getattr(m, "cell_data", {})
-    for key in CELL_TAG_KEYS:
-        data = cell_data.get(key)
-        if data is None or len(data) <= max(tetra):
-            continue
-        try:
-            values = np.concatenate([np.asarray(data[i], dtype=np.float64).reshape(-1) for i in tetra])
-        except (TypeError, ValueError):
-            continue
-        if values.size == n_tets and np.all(np.isfinite(values)) and np.all(values == np.round(values)):
-            return values.astype(np.int64)
-    return None
-
-
-def write_mesh(path: PathLike, mesh: "Mesh") -> None:
-    """Write a mesh as ``.tet`` (full float precision) or through meshio.
+def write_mesh(path: PathLike, mesh: Mesh) -> None:
+    """Write a mesh as ``.tet`` (full float precision) or through meshio (:meth:`Mesh.write`).
 
     Raises
     ------
     InputError
         ``path`` is the file the mesh was read from.
     """
+    mesh.write(path)
+
+
+def read_points(path: PathLike) -> NDArray[np.float64]:
+    """Points ``(k, 3)`` from a file: NumPy's ``.npy`` (an array of shape ``(k, 3)``) or a text
+    table (``.csv``, ``.txt``, ``.dat``: three columns x, y, z separated by commas or
+    whitespace, ``#`` comments, at most one header line of column names).
+
+    Raises
+    ------
+    FileNotFoundError
+        No such file.
+    InputError
+        Not three finite columns, or a format other than these.
+
+    Examples
+    --------
+    >>> import numpy as np, sorofem as sf
+    >>> _ = open("/tmp/markers.csv", "w").write("x,y,z\n0.1,0,0.02\n0.2,0,0.02\n")
+    >>> sf.io.read_points("/tmp/markers.csv").shape
+    (2, 3)
+    """
     path = Path(path)
-    _refuse_overwrite(path, mesh.source)
-    if path.suffix.lower() == ".tet":
-        with path.open("w", encoding="utf-8") as fh:
-            fh.write(f"# sorofem mesh: {mesh.n_nodes} vertices, {mesh.n_tets} tetrahedra\n")
-            fh.writelines(f"v {x!r} {y!r} {z!r}\n" for x, y, z in mesh.points.tolist())
-            fh.writelines(f"t {a} {b} {c} {d}\n" for a, b, c, d in mesh.tets.tolist())
-        return
-    import meshio
+    if not path.is_file():
+        raise FileNotFoundError(f"points file not found: {path}")
+    suffix = path.suffix.lower()
+    if suffix == ".npy":
+        try:
+            arr = np.load(path, allow_pickle=False)
+        except (ValueError, OSError) as exc:
+            raise InputError(f"{path}: not a NumPy .npy array ({exc})") from None
+    elif suffix in (".csv", ".txt", ".dat"):
+        lines = [line.split("#", 1)[0].strip() for line in path.read_text(encoding="utf-8").splitlines()]
+        rows = [line.replace(",", " ").split() for line in lines if line]
+        try:
+            float(rows[0][0]) if rows else None
+        except ValueError:
+            rows = rows[1:]  # a header of column names
+        try:
+            arr = np.array([[float(v) for v in row] for row in rows], dtype=np.float64)
+        except ValueError as exc:
+            raise InputError(f"{path}: expected numbers in three columns x, y, z ({exc})") from None
+        if arr.size == 0 or any(len(row) != 3 for row in rows):
+            counts = sorted({len(row) for row in rows})
+            raise InputError(f"{path}: expected three columns x, y, z on every line, got {counts or 'no rows'}")
+    else:
+        raise InputError(f"{path}: expected a .npy array or a .csv/.txt table of points, got a {suffix or 'file without suffix'}")
+    if arr.ndim != 2 or arr.shape[1] != 3 or arr.dtype.kind not in "fiu":
+        raise InputError(f"{path}: expected an array of shape (k, 3), got shape {arr.shape} ({arr.dtype})")
+    arr = arr.astype(np.float64)
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{path}: expected finite coordinates")
+    return arr
 
-    meshio.write_points_cells(path, mesh.points, [("tetra", mesh.tets)])
 
-
-def write_result(
-    path: PathLike,
-    result: "StaticResult",
+def result_mesh(
+    result: ResultLike,
     extra_point_data: Mapping[str, ArrayLike] | None = None,
-) -> None:
-    """Write a result (normally ``.vtu``) for ParaView.
+    *,
+    points: str = "rest",
+) -> Any:
+    """A result as a :class:`meshio.Mesh`: linear tetrahedra with point data ``displacement``
+    (m), ``pressure`` (Pa, mixed formulation only) and ``extra_point_data``, cell data ``J``
+    (volume ratio) and ``von_mises`` (Pa).
 
-    The points are the **deformed** positions. Point data: ``displacement`` (m),
-    ``pressure`` (Pa, mixed formulations only) and ``extra_point_data``; cell data:
-    ``J`` (volume ratio) and ``von_mises`` (Pa). Use ParaView's "Warp By Vector" with
-    scale -1 on ``displacement`` to see the rest shape.
+    Parameters
+    ----------
+    points
+        ``"rest"`` (default, the finite-element convention): the rest positions, so that
+        ParaView's "Warp By Vector" on ``displacement`` (scale 1) shows the deformed body;
+        ``"deformed"``: the deformed positions (then warping would deform it twice).
 
     Raises
     ------
     InputError
-        ``path`` is the input mesh file, or ``extra_point_data`` has a wrong length.
+        ``points`` is neither, or ``extra_point_data`` has a wrong length.
     """
     import meshio
 
-    path = Path(path)
+    if points not in ("rest", "deformed"):
+        raise InputError(f"points: expected 'rest' or 'deformed', got {points!r}")
     mesh = result.mesh
-    _refuse_overwrite(path, mesh.source)
     point_data: dict[str, np.ndarray] = {"displacement": result.displacement}
     if result.pressure is not None:
         point_data["pressure"] = result.pressure
@@ -308,7 +217,32 @@ def write_result(
             )
         point_data[str(name)] = arr
     cell_data = {"J": [result.J], "von_mises": [result.von_mises]}
-    meshio.write(
-        path,
-        meshio.Mesh(result.positions, [("tetra", mesh.tets)], point_data=point_data, cell_data=cell_data),
-    )
+    xyz = mesh.points if points == "rest" else result.positions
+    return meshio.Mesh(np.array(xyz), [("tetra", mesh.tets)], point_data=point_data, cell_data=cell_data)
+
+
+def write_result(
+    path: PathLike,
+    result: ResultLike,
+    extra_point_data: Mapping[str, ArrayLike] | None = None,
+    *,
+    points: str = "rest",
+) -> None:
+    """Write a result (normally ``.vtu``) for ParaView: :func:`result_mesh` written by meshio.
+
+    The points are the **rest** positions and the point data ``displacement`` carries the
+    motion (the finite-element convention): in ParaView, "Warp By Vector" on ``displacement``
+    with scale 1 shows the deformed body, once. ``points="deformed"`` writes the deformed
+    positions instead (e.g. a second file ``deformed.vtu`` to open without a filter).
+
+    Raises
+    ------
+    InputError
+        ``path`` is the input mesh file, ``points`` is unknown, or ``extra_point_data`` has a
+        wrong length.
+    """
+    import meshio
+
+    path = Path(path)
+    refuse_overwrite(path, result.mesh.source)
+    meshio.write(path, result_mesh(result, extra_point_data, points=points))

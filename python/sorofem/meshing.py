@@ -3,14 +3,15 @@
 Users often have only the surface of a moulded robot: the CAD model of the mould cavity
 exported as STL. :func:`tetrahedralize` checks that surface (closed, manifold, consistently
 oriented, no degenerate triangle), fills it with linear tetrahedra and returns a
-:class:`sorofem.Mesh`. :func:`read_surface`, :func:`check_surface` and
-:func:`surface_volume` are the pieces it is built from.
+:class:`sorofem.Mesh`. :func:`read_surface` (that of :mod:`sorofem.io`), :func:`check_surface`
+and :func:`surface_volume` are the pieces it is built from.
 
 The mesher
 ----------
 The tetrahedralisation is done by fTetWild (Hu et al., "Fast Tetrahedral Meshing in the
 Wild", SIGGRAPH 2020; github.com/wildmeshing/fTetWild) through its PyPI wrapper
-``pytetwild``, an **optional** dependency: ``pip install 'sorofem[mesh]'``. Nothing else in
+``pytetwild``, an **optional** dependency: ``pip install ".[mesh]"`` from a checkout of sorofem
+(README, "Install"). Nothing else in
 sorofem needs it, and it is imported only when :func:`tetrahedralize` runs. Why this one:
 
 * **Licence.** fTetWild and ``pytetwild`` are MPL-2.0 (file-level copyleft: using the
@@ -55,7 +56,6 @@ from __future__ import annotations
 
 import contextlib
 import importlib
-import math
 import numbers
 import os
 import tempfile
@@ -65,7 +65,10 @@ from typing import Any, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._validate import boolean, describe, positive_scalar
 from .errors import InputError, MeshError, ParameterError, ShapeError
+from .io import read_surface
+from .mesh import Mesh
 
 __all__ = [
     "MESHER",
@@ -82,24 +85,12 @@ __all__ = [
 #: The Python package that does the tetrahedralisation (fTetWild's wrapper).
 MESHER = "pytetwild"
 #: How to install it.
-INSTALL_HINT = "pip install 'sorofem[mesh]'"
+INSTALL_HINT = "pip install \".[mesh]\" from a checkout of sorofem (or pip install 'pytetwild>=0.2.3,<0.3')"
 #: A triangle is degenerate when its area is below this times its longest edge squared
 #: (an equilateral triangle has 0.43); rounding leaves ~1e-16 on collinear points.
 DEGENERATE_AREA = 1e-12
 
 PathLike = str | os.PathLike[str]
-
-
-def _describe(value: Any) -> str:
-    if isinstance(value, np.ndarray):
-        return f"an array of shape {value.shape} and dtype {value.dtype}"
-    return f"{type(value).__name__} {value!r}"
-
-
-def _positive(value: Any, name: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not (0 < float(value) < math.inf):
-        raise ParameterError(f"{name}: expected a finite number > 0, got {_describe(value)}", name)
-    return float(value)
 
 
 # ---------------------------------------------------------------------------
@@ -131,7 +122,7 @@ def require_mesher() -> Any:
         if exc.name and exc.name.split(".")[0] == "pyvista":
             raise ImportError(
                 f"the installed {MESHER} imports PyVista, which is not installed; install the "
-                f"version sorofem asks for ({INSTALL_HINT}, i.e. 'pytetwild>=0.2.3,<0.3') or "
+                f"version sorofem asks for ({INSTALL_HINT}) or "
                 f"PyVista (pip install pyvista)"
             ) from exc
         raise
@@ -157,81 +148,16 @@ def mesher_available() -> bool:
 # Surfaces
 
 
-def read_surface(path: PathLike, scale: float = 1.0) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-    """Read a triangle surface with meshio (``.stl``, ``.obj``, ``.ply``, ``.off``, ...).
-
-    Triangles are kept and quadrilaterals split in two; points, lines and vertices cells are
-    ignored. The result is **not** checked: pass it to :func:`check_surface`.
-
-    Parameters
-    ----------
-    path
-        The surface file.
-    scale
-        Factor applied to the coordinates (``1e-3`` for a CAD export in millimetres).
-
-    Returns
-    -------
-    points, triangles
-        ``(n, 3)`` float64 (m) and ``(m, 3)`` int64.
-
-    Raises
-    ------
-    FileNotFoundError
-        No such file.
-    MeshError
-        meshio cannot read it, or it holds no triangles (a volume mesh: use
-        :meth:`sorofem.Mesh.read`).
-
-    Examples
-    --------
-    >>> points, triangles = sf.meshing.read_surface("finger.stl", scale=1e-3)  # doctest: +SKIP
-    """
-    from .io import meshio_read
-
-    scale = _positive(scale, "scale")
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"surface file not found: {path}")
-    m = meshio_read(path, "surface")
-    blocks: list[np.ndarray] = []
-    for cells in m.cells:
-        data = np.asarray(cells.data, dtype=np.int64)
-        if cells.type == "triangle":
-            blocks.append(data.reshape(-1, 3))
-        elif cells.type == "quad":
-            data = data.reshape(-1, 4)
-            blocks += [data[:, [0, 1, 2]], data[:, [0, 2, 3]]]
-    kinds = sorted({c.type for c in m.cells})
-    if any(k in kinds for k in ("tetra", "hexahedron", "wedge", "pyramid", "tetra10")):
-        raise MeshError(
-            f"{path}: this is a volume mesh (cells: {', '.join(kinds)}), not a surface; read it with "
-            f"sorofem.Mesh.read(path)"
-        )
-    others = [k for k in kinds if k not in ("triangle", "quad", "line", "vertex")]
-    if others:
-        raise MeshError(
-            f"{path}: surface cells must be triangles (or quads); found {', '.join(others)}: triangulate "
-            f"the surface before tetrahedralising it"
-        )
-    if not blocks:
-        raise MeshError(f"{path}: no triangles found; cell types in the file: {', '.join(kinds) or 'none'}")
-    points = np.asarray(m.points, dtype=np.float64)
-    if points.ndim != 2 or points.shape[1] != 3:
-        raise MeshError(f"{path}: expected 3-D points, got an array of shape {points.shape}")
-    return points * scale, np.concatenate(blocks)
-
-
 def _surface_arrays(points: ArrayLike, triangles: ArrayLike, name: str) -> tuple[np.ndarray, np.ndarray]:
     """Shapes, dtypes, finiteness and index range of a surface given as arrays."""
     try:
         pts = np.asarray(points)
     except (TypeError, ValueError) as exc:
-        raise ShapeError(f"{name} points: expected an (n, 3) array of numbers, got {_describe(points)} ({exc})") from None
+        raise ShapeError(f"{name} points: expected an (n, 3) array of numbers, got {describe(points)} ({exc})") from None
     if pts.dtype == object or pts.dtype == np.bool_ or not (
         np.issubdtype(pts.dtype, np.floating) or np.issubdtype(pts.dtype, np.integer)
     ):
-        raise ShapeError(f"{name} points: expected real numbers, got {_describe(pts)}")
+        raise ShapeError(f"{name} points: expected real numbers, got {describe(pts)}")
     if pts.ndim != 2 or pts.shape[1] != 3:
         raise ShapeError(f"{name} points: expected shape (n, 3), got shape {pts.shape}")
     pts = np.ascontiguousarray(pts, dtype=np.float64)
@@ -241,9 +167,9 @@ def _surface_arrays(points: ArrayLike, triangles: ArrayLike, name: str) -> tuple
     try:
         tri = np.asarray(triangles)
     except (TypeError, ValueError) as exc:
-        raise ShapeError(f"{name} triangles: expected an (m, 3) integer array, got {_describe(triangles)} ({exc})") from None
+        raise ShapeError(f"{name} triangles: expected an (m, 3) integer array, got {describe(triangles)} ({exc})") from None
     if tri.dtype == np.bool_ or not np.issubdtype(tri.dtype, np.integer):
-        raise ShapeError(f"{name} triangles: expected integer point indices, got {_describe(tri)}")
+        raise ShapeError(f"{name} triangles: expected integer point indices, got {describe(tri)}")
     if tri.ndim != 2 or tri.shape[1] != 3:
         raise ShapeError(f"{name} triangles: expected shape (m, 3), got shape {tri.shape}")
     if len(tri) < 4:
@@ -424,7 +350,7 @@ def _as_surface(surface: Any, scale: float) -> tuple[np.ndarray, np.ndarray, Pat
     if isinstance(surface, np.ndarray) or not isinstance(surface, Sequence) or len(surface) != 2:
         raise InputError(
             f"surface: expected a file path (.stl, .obj, .ply, .off, ...) or a (points, triangles) pair, "
-            f"got {_describe(surface)}"
+            f"got {describe(surface)}"
         )
     points, triangles = surface
     points, triangles = _surface_arrays(points, triangles, "surface")
@@ -441,10 +367,10 @@ def tetrahedralize(
     coarsen: bool = True,
     check_volume: bool = True,
     threads: int = 0,
-) -> "Mesh":
+) -> Mesh:
     """Fill a closed triangle surface with linear tetrahedra (fTetWild, optional extra).
 
-    Needs the optional mesher: ``pip install 'sorofem[mesh]'`` (see the module docstring
+    Needs the optional mesher: ``pip install ".[mesh]"`` from a checkout (see the module docstring
     for the choice of fTetWild). The surface is checked first (:func:`check_surface`), then
     meshed; the mesh is oriented and validated by :class:`sorofem.Mesh`, and its volume is
     compared with the volume the surface encloses (divergence theorem).
@@ -498,7 +424,7 @@ def tetrahedralize(
     Raises
     ------
     ImportError
-        The mesher is not installed (the message says ``pip install 'sorofem[mesh]'``).
+        The mesher is not installed (the message says how to install it: :data:`INSTALL_HINT`).
     FileNotFoundError
         No such surface file.
     ShapeError, MeshError
@@ -513,19 +439,16 @@ def tetrahedralize(
     >>> body = sf.Body(mesh, sf.NeoHookean(youngs_modulus=150e3, poisson_ratio=0.49, density=1070),
     ...                formulation="mixed")                                   # doctest: +SKIP
     """
-    from .model import Mesh
-
-    scale = _positive(scale, "scale")
+    scale = positive_scalar(scale, "scale")
     if edge_length is not None:
-        edge_length = _positive(edge_length, "edge_length")
-    envelope = _positive(envelope, "envelope")
+        edge_length = positive_scalar(edge_length, "edge_length")
+    envelope = positive_scalar(envelope, "envelope")
     if envelope > 0.1:
         raise ParameterError(f"envelope: expected a fraction of the bounding-box diagonal in (0, 0.1], got {envelope}", "envelope")
     for flag, name in ((simplify, "simplify"), (coarsen, "coarsen"), (check_volume, "check_volume")):
-        if not isinstance(flag, (bool, np.bool_)):
-            raise ParameterError(f"{name}: expected True or False, got {_describe(flag)}", name)
+        boolean(flag, name)
     if isinstance(threads, bool) or not isinstance(threads, numbers.Integral) or threads < 0:
-        raise ParameterError(f"threads: expected an integer >= 0 (0: all cores), got {_describe(threads)}", "threads")
+        raise ParameterError(f"threads: expected an integer >= 0 (0: all cores), got {describe(threads)}", "threads")
 
     points, triangles, path = _as_surface(surface, scale)
     name = f"surface {path}" if path is not None else "surface"

@@ -37,15 +37,15 @@ Examples
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import InputError, MeshError, ShapeError
+from .errors import InputError, ShapeError
+from .io import Surface, read_surface
+from .mesh import Mesh
 
 __all__ = ["Target", "BoundTarget", "Surface", "read_surface", "embed_points"]
 
@@ -57,85 +57,6 @@ CANDIDATES = 24
 
 # ---------------------------------------------------------------------------
 # Surfaces
-
-
-@dataclass(frozen=True)
-class Surface:
-    """A triangle surface: ``vertices`` ``(v, 3)`` (m) and ``faces`` ``(f, 3)`` (0-based)."""
-
-    vertices: NDArray[np.float64]
-    faces: NDArray[np.int64]
-
-    def same_topology(self, other: "Surface") -> bool:
-        """Whether both have the same vertex count and the same faces, vertex for vertex
-        (orientation and face order ignored)."""
-        if len(self.vertices) != len(other.vertices) or len(self.faces) != len(other.faces):
-            return False
-        a = np.unique(np.sort(self.faces, axis=1), axis=0)
-        b = np.unique(np.sort(other.faces, axis=1), axis=0)
-        return a.shape == b.shape and bool(np.all(a == b))
-
-
-def _read_obj(path: Path) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-    """Vertices and triangles of a Wavefront OBJ (polygons fanned into triangles)."""
-    vertices: list[list[float]] = []
-    faces: list[list[int]] = []
-    with path.open(encoding="utf-8", errors="replace") as fh:
-        for line_no, line in enumerate(fh, 1):
-            parts = line.split()
-            if not parts:
-                continue
-            try:
-                if parts[0] == "v":
-                    vertices.append([float(v) for v in parts[1:4]])
-                elif parts[0] == "f":
-                    idx = [int(p.split("/")[0]) for p in parts[1:]]
-                    idx = [i - 1 if i > 0 else len(vertices) + i for i in idx]
-                    faces.extend([idx[0], idx[k], idx[k + 1]] for k in range(1, len(idx) - 1))
-            except (ValueError, IndexError):
-                raise MeshError(f"{path}:{line_no}: cannot parse OBJ line {line.strip()!r}") from None
-    return np.asarray(vertices, dtype=np.float64).reshape(-1, 3), np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-
-
-def read_surface(path: str | os.PathLike[str], scale: float = 1.0) -> Surface:
-    """Read a triangle surface: OBJ (own reader) or anything meshio reads (its triangles).
-
-    Parameters
-    ----------
-    path
-        The file.
-    scale
-        Multiplies the coordinates (e.g. 0.01 for a file in centimetres).
-
-    Raises
-    ------
-    MeshError
-        Missing or unreadable file, no vertices, or face indices out of range.
-
-    Examples
-    --------
-    >>> surf = sf.targets.read_surface("hammer_target.obj", scale=0.01)  # doctest: +SKIP
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise MeshError(f"surface: file not found: {path}")
-    if path.suffix.lower() == ".obj":
-        vertices, faces = _read_obj(path)
-    else:
-        import meshio
-
-        try:
-            m = meshio.read(path)
-        except Exception as exc:  # meshio raises many types
-            raise MeshError(f"surface: cannot read {path} with meshio: {exc}") from None
-        vertices = np.asarray(m.points, dtype=np.float64)[:, :3]
-        tri = [c.data for c in m.cells if c.type == "triangle"]
-        faces = np.vstack(tri).astype(np.int64) if tri else np.zeros((0, 3), dtype=np.int64)
-    if len(vertices) == 0:
-        raise MeshError(f"surface: {path} has no vertices")
-    if faces.size and (faces.min() < 0 or faces.max() >= len(vertices)):
-        raise MeshError(f"surface: {path} has face indices outside [0, {len(vertices)})")
-    return Surface(vertices * float(scale), faces)
 
 
 def _as_surface(value: Any, scale: float, name: str) -> Surface:
@@ -156,7 +77,7 @@ def _as_surface(value: Any, scale: float, name: str) -> Surface:
 # Barycentric embedding
 
 
-def embed_points(mesh: Any, points: ArrayLike, outside: str = "error") -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+def embed_points(mesh: Mesh, points: ArrayLike, outside: str = "error") -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     """Tetrahedron and barycentric weights of each rest point.
 
     Candidates are the tetrahedra with the nearest centroids (``scipy.spatial.cKDTree``);
@@ -409,7 +330,7 @@ class Target:
 
     # -- binding --------------------------------------------------------------------------
 
-    def bind(self, mesh: Any) -> BoundTarget:
+    def bind(self, mesh: Mesh) -> BoundTarget:
         """The target's residual and Jacobian on ``mesh`` (a :class:`sorofem.Mesh`).
 
         Raises

@@ -12,6 +12,7 @@
 
 pub mod assembly;
 pub mod cables;
+pub mod contact;
 pub mod energy;
 pub mod error;
 pub mod linear;

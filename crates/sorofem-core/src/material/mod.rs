@@ -3,11 +3,18 @@
 //! Flattening convention for 3x3 tensors: entry (i, j) is component `3 i + j` of a 9-vector, so
 //! a fourth-order tangent dP/dF is a 9x9 matrix `A[3i+j, 3k+l] = dP_ij / dF_kl`.
 
+pub mod isochoric;
 pub mod law;
+pub mod mooney_rivlin;
 pub mod neo_hookean;
+pub mod ogden;
+pub mod yeoh;
 
 pub use law::{Hyperelastic, RestParamGradient};
+pub use mooney_rivlin::MooneyRivlin;
 pub use neo_hookean::{NeoHookean, Volumetric};
+pub use ogden::Ogden;
+pub use yeoh::Yeoh;
 
 use nalgebra::{Matrix3, SMatrix, SymmetricEigen};
 

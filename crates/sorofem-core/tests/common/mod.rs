@@ -217,3 +217,19 @@ pub fn tip_displacement(model: &Model, solution: &Solution, length: f64) -> [f64
     }
     u
 }
+
+use sorofem_core::contact::{CollisionMesh, Obstacle, ObstacleMesh, Plane, Sphere};
+
+/// A 0.1 m cube of `cells^3` hexahedra (split into tets) whose bottom face is 2 mm above the plane
+/// z = 0, whose top centre is 3 mm below a 20 mm sphere, and whose side x = 0.1 is 3 mm from a box
+/// obstacle (obstacles 0, 1 and 2 of the collision mesh).
+pub fn contact_scene(cells: usize, self_contact: bool) -> (TetMesh, CollisionMesh) {
+    let mesh = TetMesh::box_mesh([0.1; 3], [cells; 3], [0.0, 0.0, 0.002]).unwrap();
+    let obstacles = vec![
+        Obstacle::Plane(Plane::try_new([0.0; 3], [0.0, 0.0, 1.0]).unwrap()),
+        Obstacle::Sphere(Sphere::try_new([0.05, 0.05, 0.102 + 0.003 + 0.02], 0.02).unwrap()),
+        Obstacle::Mesh(ObstacleMesh::cuboid([0.103, 0.02, 0.03], [0.15, 0.08, 0.07]).unwrap()),
+    ];
+    let collision = CollisionMesh::from_tet_mesh(&mesh, obstacles, self_contact);
+    (mesh, collision)
+}

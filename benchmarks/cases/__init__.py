@@ -1,0 +1,10 @@
+"""The benchmark case families, one module each. Importing this package registers them; the
+order of the imports is the order of the tables in BENCHMARKS.md and of the runs."""
+
+from . import static  # noqa: F401  (cantilevers, standard formulation)
+from . import hammerbot  # noqa: F401  (the paper's robot, standard and mixed)
+from . import mixed  # noqa: F401  (cantilevers, mixed formulation)
+from . import cables  # noqa: F401
+from . import dynamics  # noqa: F401
+from . import adjoint  # noqa: F401
+from . import peers  # noqa: F401  (scikit-fem, and the comparison section)

@@ -1,0 +1,107 @@
+"""The "Targets" section of BENCHMARKS.md: each issue's targets against the measured numbers.
+
+A case with a target adds its line here; the rows of every case family are available.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from cases import peers
+from cases.common import MIXED_NU, cantilever_name, per_iteration_ratio
+from harness import Row, fmt, in_table, ratio, section
+
+TARGETS_TITLE = "Targets"
+PAPER_HAMMERBOT_SECONDS = 7.6  # the paper's hammerbot static solve
+
+
+@section(TARGETS_TITLE)
+def targets(rows: dict[str, Row], array_dir: Path) -> str:
+    """Every issue's targets against the measured numbers."""
+    lines = ["| target | case | measured | limit | met |", "|---|---|---|---|---|"]
+
+    def add(target: str, case_name: str, value: float | None, limit: float, unit: str = "",
+            at_least: bool = False) -> None:
+        bound = (">= " if at_least else "<= ") + f"{limit:g}{unit}"
+        if value is None:
+            lines.append(f"| {target} | {case_name} | not measured | {bound} | - |")
+        else:
+            ok = "yes" if (value >= limit if at_least else value <= limit) else "**NO**"
+            lines.append(f"| {target} | {case_name} | {fmt(value)}{unit} | {bound} | {ok} |")
+
+    def ok_row(name: str) -> Row | None:
+        r = rows.get(name)
+        return r if r and not r.get("error") and r.get("converged") else None
+
+    # Issue 2: static Neo-Hookean solves.
+    r = ok_row("sorofem/hammerbot")
+    add("hammerbot static solve time", "sorofem/hammerbot", r and r["seconds"], 0.25, " s")
+    for name, limit in [("sorofem/cantilever-0.4m-8x2x2", 12), ("sorofem/cantilever-1m-8x2x2", 25),
+                        ("sorofem/cantilever-1m-16x4x4", 25), ("sorofem/cantilever-1m-48x8x8", 25)]:
+        if name in rows:
+            r = rows[name]
+            add("Newton iterations, one load step", name, None if r.get("error") else r.get("iterations"), limit)
+    for name, r in rows.items():
+        if in_table(name, "static") and r.get("tets", 0) >= 10_000 and not r.get("error"):
+            add("time per Newton iteration / one bare numeric factorisation", name, per_iteration_ratio(r), 1.3)
+    for name, r in rows.items():
+        if in_table(name, "static") and r.get("tets", 0) >= 90_000:
+            add("peak memory, ~100k tets", name, r.get("peak_rss_mib") and r["peak_rss_mib"] / 1024, 8.0, " GiB")
+    for name in rows:
+        if name.startswith("skfem/") and (ratio_to_peer := peers.speedup(rows, name)):
+            add("speed-up over scikit-fem (time skfem / sorofem)", name, ratio_to_peer, 50, "x", at_least=True)
+
+    # Mixed formulation.
+    mixed_bot, std_bot = f"sorofem/hammerbot-mixed-nu{MIXED_NU:g}", "sorofem/hammerbot"
+    if mixed_bot in rows:
+        m, s = ok_row(mixed_bot), ok_row(std_bot)
+        add(f"hammerbot mixed (nu = {MIXED_NU:g}) solve time / standard hammerbot solve time (nu = 0.4)",
+            f"{mixed_bot} vs {std_bot}", m and s and ratio(m["seconds"], s["seconds"]), 2.0, "x")
+        add(f"hammerbot mixed solve time, >= 10x faster than the paper's {PAPER_HAMMERBOT_SECONDS:g} s",
+            mixed_bot, m and m["seconds"], PAPER_HAMMERBOT_SECONDS / 10, " s")
+    mixed_small = cantilever_name("sorofem", 0.4, (8, 2, 2)) + f"-mixed-nu{MIXED_NU:g}"
+    std_small = cantilever_name("sorofem", 0.4, (8, 2, 2))
+    if mixed_small in rows:
+        m, s = ok_row(mixed_small), ok_row(std_small)
+        limit = s["iterations"] if s else None
+        if limit is None:
+            lines.append(f"| Newton iterations, mixed at nu = {MIXED_NU:g} vs standard at nu = 0.45 | {mixed_small} "
+                         f"| {fmt(m and m['iterations'])} | standard not measured | - |")
+        else:
+            add(f"Newton iterations, mixed at nu = {MIXED_NU:g} <= standard at nu = 0.45 ({std_small})",
+                mixed_small, m and m["iterations"], limit)
+    for name, r in rows.items():
+        if in_table(name, "mixed") and r.get("tets", 0) >= 90_000:
+            add("peak memory, ~100k tets, mixed", name,
+                r.get("peak_rss_mib") and r["peak_rss_mib"] / 1024, 12.0, " GiB")
+
+    # Cables.
+    r = rows.get("sorofem/hammerbot-2-cables")
+    if r is not None:
+        good = ok_row("sorofem/hammerbot-2-cables")
+        add("static solve time with two cables / without (same process, alternating)", "sorofem/hammerbot-2-cables",
+            good and ratio(good["seconds"], good["seconds_without"]), 1.15, "x")
+        add("time per Newton iteration with two cables / without", "sorofem/hammerbot-2-cables",
+            good and ratio(good["seconds_per_iteration"], good["seconds_per_iteration_without"]), 1.15, "x")
+        add("hammerbot with two cables, static solve time", "sorofem/hammerbot-2-cables",
+            good and good["seconds"], 0.4, " s")
+
+    # Dynamics.
+    r = rows.get("sorofem/hammerbot-dynamics-1s")
+    if r is not None:
+        good = ok_row("sorofem/hammerbot-dynamics-1s")
+        add("1 s of hammerbot dynamics at dt = 10 ms, time", "sorofem/hammerbot-dynamics-1s",
+            good and good["seconds"], 10.0, " s")
+        failed = bool(r.get("error") or not r.get("converged"))
+        lines.append(f"| 1 s of hammerbot dynamics: no Newton failure | sorofem/hammerbot-dynamics-1s | "
+                     f"{'failed' if failed else 'none'} ({fmt(r.get('cutbacks'))} cutbacks, "
+                     f"{fmt(r.get('iterations'))} Newton it.) | no failure | {'**NO**' if failed else 'yes'} |")
+
+    # Adjoint.
+    r = rows.get("sorofem/hammerbot-adjoint")
+    if r is not None:
+        good = ok_row("sorofem/hammerbot-adjoint")
+        add("adjoint (1st call, incl. its factorisation) / forward solve", "sorofem/hammerbot-adjoint",
+            good and ratio(good["seconds"], good["seconds_forward"]), 0.25, "x")
+    return "\n".join(lines) + "\n"
+

@@ -1,0 +1,390 @@
+"""The body: a mesh, a material, supports, nodal loads and cables, and the compiled model that
+solves it.
+
+Examples
+--------
+>>> import sorofem as sf
+>>> mesh = sf.Mesh.box(size=(1.0, 0.1, 0.1), cells=(8, 2, 2))
+>>> body = sf.Body(mesh, sf.NeoHookean(youngs_modulus=66e3, poisson_ratio=0.45, density=1080))
+>>> body.fix(mesh.nodes_in_box(min=(-1e-9, -1, -1), max=(1e-9, 1, 1)))
+>>> body.fixed_nodes.size
+9
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ._extension import core
+from ._validate import as_index_array, choice, describe, positive_scalar, vector_per_node
+from .cables import Cable, CablePlacement, cable_index, check_actuation
+from .errors import InputError
+from .materials import Material
+from .mesh import Mesh
+
+__all__ = ["Body", "FORMULATIONS", "VOLUMETRIC_MEASURES", "PRESSURE_MASSES"]
+
+#: Formulations the solver accepts: displacement only, or displacement + nodal pressure.
+FORMULATIONS: tuple[str, ...] = ("standard", "mixed")
+#: Volumetric measures ``c(J)`` of the energy ``lambda/2 c(J)^2``: ``ln J`` or ``J - 1``.
+VOLUMETRIC_MEASURES: tuple[str, ...] = ("log", "linear")
+#: Pressure mass matrices of the mixed formulation.
+PRESSURE_MASSES: tuple[str, ...] = ("consistent", "lumped")
+
+
+class Body:
+    """A mesh, a material, boundary conditions and nodal loads.
+
+    The material, the formulation and its options may be changed later (``body.formulation =
+    "mixed"``): the new value is checked as in the constructor and the next solve uses it.
+    :meth:`replace` gives a copy with other values instead.
+
+    Parameters
+    ----------
+    mesh
+        The rest configuration.
+    material
+        A :class:`~sorofem.NeoHookean` (scalar or per-element parameters).
+    formulation
+        ``"standard"``: displacement-only linear tetrahedra; they lock (come out far too
+        stiff) as nu -> 0.5. ``"mixed"``: linear displacement plus a continuous linear nodal
+        pressure ``p`` (Pa), a perturbed-Lagrangian saddle point that does not lock; the
+        volumetric energy ``lambda/2 c(J)^2`` becomes ``p c(J) - p^2 / (2 lambda)``, so
+        ``p ~ lambda c(J)`` is positive in tension. See :data:`FORMULATIONS`.
+    volumetric
+        ``"log"`` (default): ``c(J) = ln J``; ``"linear"``: ``c(J) = J - 1``, which makes the
+        nearly incompressible limit preserve volume (rather than mean ``ln J``) exactly.
+        Used by both formulations.
+    pressure_mass
+        Mixed only (ignored by ``"standard"``): the pressure mass matrix ``M_p`` of the
+        compliance ``C = M_p / lambda``, ``"consistent"`` (default, exact P1) or
+        ``"lumped"`` (diagonal).
+
+    Raises
+    ------
+    InputError
+        Unknown formulation, volumetric measure or pressure mass.
+    ParameterError
+        ``formulation="mixed"`` with ``lame_lambda = 0`` (``poisson_ratio = 0``) anywhere:
+        the mixed form divides by lambda.
+
+    Examples
+    --------
+    >>> import sorofem as sf
+    >>> mesh = sf.Mesh.box(size=(1.0, 0.1, 0.1), cells=(8, 2, 2))
+    >>> body = sf.Body(mesh, sf.NeoHookean(youngs_modulus=66e3, poisson_ratio=0.45))
+    >>> body.fix(mesh.nodes_on_plane((0, 0, 0), (1, 0, 0)))
+    >>> body.add_force(mesh.nodes_on_plane((1, 0, 0), (1, 0, 0)), (0, 0, -0.01))
+    >>> body.fixed_nodes.size
+    9
+
+    Nearly incompressible silicone, without locking:
+
+    >>> silicone = sf.NeoHookean(youngs_modulus=66e3, poisson_ratio=0.4999, density=1080)
+    >>> body = sf.Body(mesh, silicone, formulation="mixed", volumetric="log", pressure_mass="consistent")
+    >>> body.fix(mesh.nodes_on_plane((0, 0, 0), (1, 0, 0)))
+    >>> result = sf.solve_static(body, gravity=(0, 0, -9.81))
+    >>> result.pressure.shape, abs(result.mean_log_j) < 1e-4
+    ((81,), True)
+    """
+
+    def __init__(
+        self,
+        mesh: Mesh,
+        material: Material,
+        formulation: str = "standard",
+        *,
+        volumetric: str = "log",
+        pressure_mass: str = "consistent",
+    ) -> None:
+        if not isinstance(mesh, Mesh):
+            raise InputError(f"mesh: expected a sorofem.Mesh, got {describe(mesh)}")
+        self._mesh = mesh
+        self._formulation = choice(formulation, "formulation", FORMULATIONS)
+        self._volumetric = choice(volumetric, "volumetric", VOLUMETRIC_MEASURES)
+        self._pressure_mass = choice(pressure_mass, "pressure_mass", PRESSURE_MASSES)
+        self._material = self._checked_material(material, self._formulation)
+        self._fixed = np.zeros(0, dtype=np.int64)
+        self._prescribed = np.zeros((0, 3), dtype=np.float64)
+        self._forces = np.zeros((mesh.n_nodes, 3), dtype=np.float64)
+        self._cables: list[Cable] = []
+        self._actuations: list[float] = []
+        self._stiffnesses: list[float] = []
+        # The extension's Model and what it was built for: rebuilt when the supports, the cables
+        # or the formulation change, since building it analyses the sparsity pattern.
+        self._model: Any = None
+        self._model_key: tuple[Any, ...] | None = None
+
+    # -- what the body is made of ------------------------------------------------------
+
+    @property
+    def mesh(self) -> Mesh:
+        """The rest configuration."""
+        return self._mesh
+
+    @property
+    def material(self) -> Material:
+        """The material; assigning another one checks it against the mesh and the formulation."""
+        return self._material
+
+    @material.setter
+    def material(self, material: Material) -> None:
+        self._material = self._checked_material(material, self._formulation)
+
+    @property
+    def formulation(self) -> str:
+        """``"standard"`` or ``"mixed"``; assigning checks the value (and lambda > 0 for mixed)
+        and the next solve rebuilds the model."""
+        return self._formulation
+
+    @formulation.setter
+    def formulation(self, formulation: str) -> None:
+        formulation = choice(formulation, "formulation", FORMULATIONS)
+        self._checked_material(self._material, formulation)
+        self._formulation = formulation
+
+    @property
+    def volumetric(self) -> str:
+        """The volumetric measure, ``"log"`` or ``"linear"``; assigning takes effect at the next solve."""
+        return self._volumetric
+
+    @volumetric.setter
+    def volumetric(self, volumetric: str) -> None:
+        self._volumetric = choice(volumetric, "volumetric", VOLUMETRIC_MEASURES)
+
+    @property
+    def pressure_mass(self) -> str:
+        """The mixed formulation's pressure mass, ``"consistent"`` or ``"lumped"``; assigning
+        takes effect at the next solve."""
+        return self._pressure_mass
+
+    @pressure_mass.setter
+    def pressure_mass(self, pressure_mass: str) -> None:
+        self._pressure_mass = choice(pressure_mass, "pressure_mass", PRESSURE_MASSES)
+
+    @property
+    def formulation_options(self) -> dict[str, str]:
+        """The options that apply to :attr:`formulation`: ``volumetric``, and
+        ``pressure_mass`` when mixed."""
+        options = {"volumetric": self._volumetric}
+        if self._formulation == "mixed":
+            options["pressure_mass"] = self._pressure_mass
+        return options
+
+    def _checked_material(self, material: Material, formulation: str) -> Material:
+        if not isinstance(material, Material):
+            raise InputError(f"material: expected a sorofem.NeoHookean, got {describe(material)}")
+        # Fail now rather than at solve time if per-element arrays do not fit the mesh.
+        material.per_element(self._mesh.n_tets)
+        material.check_formulation(formulation, self._mesh.n_tets)
+        return material
+
+    def replace(
+        self,
+        *,
+        material: Material | None = None,
+        formulation: str | None = None,
+        volumetric: str | None = None,
+        pressure_mass: str | None = None,
+    ) -> "Body":
+        """A copy with another material or formulation: same mesh, supports, forces, cables,
+        actuations and cable stiffnesses (copies: changing them on one body leaves the other
+        alone).
+
+        While the copy keeps the formulation, supports and cables it solves with the same
+        compiled model as this body (each solve sets its own material and cable values on it),
+        warm starts included.
+
+        Raises
+        ------
+        InputError, ParameterError
+            As the constructor, for the new values.
+
+        Examples
+        --------
+        >>> mixed = body.replace(formulation="mixed")  # doctest: +SKIP
+        """
+        other = Body(
+            self._mesh,
+            self._material if material is None else material,
+            self._formulation if formulation is None else formulation,
+            volumetric=self._volumetric if volumetric is None else volumetric,
+            pressure_mass=self._pressure_mass if pressure_mass is None else pressure_mass,
+        )
+        other._fixed = self._fixed.copy()
+        other._prescribed = self._prescribed.copy()
+        other._forces = self._forces.copy()
+        other._cables = list(self._cables)
+        other._actuations = list(self._actuations)
+        other._stiffnesses = list(self._stiffnesses)
+        other._model, other._model_key = self._model, self._model_key
+        return other
+
+    # -- supports and loads -------------------------------------------------------------
+
+    def fix(self, nodes: ArrayLike, displacement: ArrayLike | None = None) -> None:
+        """Fix nodes, optionally at a prescribed displacement.
+
+        Repeated calls accumulate; fixing a node again replaces its prescribed displacement.
+
+        Parameters
+        ----------
+        nodes
+            Node indices (1-D integers) or a boolean mask of shape ``(n_nodes,)``.
+        displacement
+            ``None`` (held in place), one ``(3,)`` vector for all nodes or ``(k, 3)``
+            per node, in metres.
+        """
+        idx = as_index_array(nodes, "nodes", self._mesh.n_nodes)
+        if displacement is None:
+            disp = np.zeros((idx.size, 3))
+        else:
+            disp = vector_per_node(displacement, "displacement", idx.size)
+        all_idx = np.concatenate([self._fixed, idx])
+        all_disp = np.concatenate([self._prescribed, disp])
+        # Last occurrence wins: unique() on the reversed arrays returns first hits.
+        uniq, first = np.unique(all_idx[::-1], return_index=True)
+        self._fixed = uniq
+        self._prescribed = all_disp[::-1][first]
+
+    def add_force(self, nodes: ArrayLike, force: ArrayLike) -> None:
+        """Add point forces, in newtons per node; repeated calls accumulate.
+
+        Parameters
+        ----------
+        nodes
+            Node indices (1-D integers, repeats add up) or a boolean mask.
+        force
+            One ``(3,)`` vector applied to every node, or ``(k, 3)`` per node.
+        """
+        idx = as_index_array(nodes, "nodes", self._mesh.n_nodes)
+        f = vector_per_node(force, "force", idx.size)
+        np.add.at(self._forces, idx, f)
+
+    @property
+    def fixed_nodes(self) -> NDArray[np.int64]:
+        """Sorted indices of the fixed nodes, ``(k,)``."""
+        return self._fixed.copy()
+
+    @property
+    def prescribed_displacement(self) -> NDArray[np.float64]:
+        """Prescribed displacement of each fixed node, ``(k, 3)``, aligned with :attr:`fixed_nodes`."""
+        return self._prescribed.copy()
+
+    @property
+    def forces(self) -> NDArray[np.float64]:
+        """Accumulated nodal forces, ``(n_nodes, 3)``, N."""
+        return self._forces.copy()
+
+    # -- cables -------------------------------------------------------------------------
+
+    def add_cable(self, cable: Cable) -> int:
+        """Add a :class:`sorofem.Cable`; returns its index. The model is rebuilt at the next
+        solve (points are located in the mesh then; see :meth:`cable_placements`).
+
+        Examples
+        --------
+        >>> import sorofem as sf
+        >>> mesh = sf.Mesh.box(size=(0.4, 0.1, 0.1), cells=(8, 2, 2))
+        >>> body = sf.Body(mesh, sf.NeoHookean(youngs_modulus=66e3, poisson_ratio=0.45))
+        >>> body.add_cable(sf.Cable.line((0, 0.05, 0.01), (1, 0, 0), 0.4, 10, stiffness=1e5))
+        0
+        """
+        if not isinstance(cable, Cable):
+            raise InputError(f"cable: expected a sorofem.Cable, got {describe(cable)}")
+        if any(c is cable for c in self._cables):
+            raise InputError("cable: this Cable has already been added to the body")
+        self._cables.append(cable)
+        self._actuations.append(cable.actuation)
+        self._stiffnesses.append(cable.stiffness)
+        return len(self._cables) - 1
+
+    def set_actuation(self, cable: Cable | int, alpha: float) -> None:
+        """Set the actuation alpha (> 0; 1 = rest length, < 1 = pulled) of a cable, given as
+        the :class:`sorofem.Cable` or its index. Takes effect at the next solve without
+        rebuilding the model."""
+        index = cable_index(self, cable)
+        self._actuations[index] = check_actuation(alpha, "alpha")
+
+    def set_cable_stiffness(self, cable: Cable | int, stiffness: float) -> None:
+        """Set the segment stiffness (N/m, > 0) of a cable of this body, given as the
+        :class:`sorofem.Cable` or its index (the :class:`~sorofem.Cable` object keeps its own
+        ``stiffness``). Takes effect at the next solve without rebuilding the model."""
+        index = cable_index(self, cable)
+        self._stiffnesses[index] = positive_scalar(stiffness, "stiffness")
+
+    @property
+    def cables(self) -> tuple[Cable, ...]:
+        """The cables added to the body, in index order."""
+        return tuple(self._cables)
+
+    @property
+    def actuations(self) -> list[float]:
+        """Current actuation alpha of each cable."""
+        return list(self._actuations)
+
+    @property
+    def cable_stiffnesses(self) -> list[float]:
+        """Current segment stiffness of each cable, N/m (see :meth:`set_cable_stiffness`)."""
+        return list(self._stiffnesses)
+
+    def cable_placements(self) -> list[list[CablePlacement]]:
+        """Where each cable point ended up: per cable, one :class:`sorofem.cables.CablePlacement`
+        per point (``kind`` "embedded", "snapped", "free" or "anchor").
+
+        Raises
+        ------
+        ParameterError
+            A point lies outside the mesh and its cable has ``outside="error"``.
+        """
+        return [[CablePlacement.from_core(p) for p in cable] for cable in self._built_model().cable_placements()]
+
+    def attached_rest_lengths(self, cable: Cable | int) -> NDArray[np.float64]:
+        """Rest length of each segment of a cable as the solver sees it, ``(k - 1,)`` m: measured
+        between the material points its points are attached to (a snapped point sits on the mesh)."""
+        index = cable_index(self, cable)
+        return np.asarray(self._built_model().cable_rest_lengths()[index], dtype=np.float64)
+
+    # -- the compiled model ---------------------------------------------------------------
+
+    def core_model(self) -> Any:
+        """The extension's ``Model`` of this body, holding its material, cable actuations and
+        cable stiffnesses, ready to solve.
+
+        Internal interface of :func:`sorofem.solve_static`, :func:`sorofem.simulate` and the
+        inverse problems (which then set their own values on it); not for user code. The model
+        is built on first use and again when the supports, the cables or the formulation
+        change: building it analyses the sparsity pattern, which is worth reusing across
+        solves.
+        """
+        model = self._built_model()
+        model.set_material(*self._material.per_element(self._mesh.n_tets))
+        for c, (alpha, stiffness) in enumerate(zip(self._actuations, self._stiffnesses)):
+            model.set_actuation(c, alpha)
+            model.set_cable_stiffness(c, stiffness)
+        return model
+
+    #: Old private name of :meth:`core_model` (the benchmarks call it).
+    _core_model = core_model
+
+    def _built_model(self) -> Any:
+        key = (self._fixed.tobytes(), len(self._cables), self._formulation, tuple(self.formulation_options.items()))
+        if self._model is None or self._model_key != key:
+            cables = [c.to_core(alpha) | {"stiffness": k}
+                      for c, alpha, k in zip(self._cables, self._actuations, self._stiffnesses)]
+            self._model = core().Model(
+                self._mesh.points, self._mesh.tets, self._fixed.copy(), self._formulation, self.formulation_options,
+                cables=cables or None,
+            )
+            self._model_key = key
+        return self._model
+
+    def __repr__(self) -> str:
+        options = "".join(f", {k}={v!r}" for k, v in self.formulation_options.items())
+        return (
+            f"Body({self._mesh!r}, {self._material!r}, formulation={self._formulation!r}{options}, "
+            f"fixed={self._fixed.size} nodes)"
+        )

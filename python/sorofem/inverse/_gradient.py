@@ -1,0 +1,78 @@
+"""The adjoint gradient of an objective of the static equilibrium: :func:`gradient`."""
+
+from __future__ import annotations
+
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ..errors import InputError
+from ..solver import SolveOptions
+from ..static import solve_static
+from ..targets import BoundTarget, Target
+from ._parameters import Parameters
+from ._problem import DEFAULT_TOLERANCE, bind
+from .results import GradientResult
+
+__all__ = ["gradient"]
+
+
+def gradient(
+    body: Any,
+    objective: Any,
+    params: str | Sequence[str] = ("shear_modulus", "lame_lambda"),
+    gravity: ArrayLike = (0.0, 0.0, 0.0),
+    *,
+    regions: Mapping[str, ArrayLike] | None = None,
+    cables: Sequence[Any] | None = None,
+    tolerance: float = DEFAULT_TOLERANCE,
+    max_iterations: int = 50,
+    load_steps: int = 1,
+    initial: Any = None,
+    options: SolveOptions | None = None,
+) -> GradientResult:
+    """Value and adjoint gradient of an objective of the static equilibrium.
+
+    Parameters
+    ----------
+    body
+        The body, at the parameter values where the gradient is wanted.
+    objective
+        A :class:`~sorofem.Target` (objective ``1/2 |r|^2``, m^2) or a callable
+        ``f(positions (n, 3)) -> (value, d value / d positions (n, 3))``.
+    params
+        Names from :data:`PARAMETERS` (see the module docstring).
+    gravity, tolerance, max_iterations, load_steps, initial, options
+        As for :func:`sorofem.solve_static`.
+    regions, cables
+        Element regions for ``"name:region"`` parameters; the cables of cable parameters
+        (default: all).
+
+    Returns
+    -------
+    GradientResult
+
+    Examples
+    --------
+    >>> g = sf.gradient(body, sf.Target.nodes([80], [[0.4, 0.1, -0.2]]), ["shear_modulus"],
+    ...                 gravity=(0, 0, -9.81))  # doctest: +SKIP
+    >>> g.gradient["shear_modulus"]  # m^2 / Pa                          # doctest: +SKIP
+    """
+    p = Parameters(body, params, regions, cables)
+    theta = p.current(gravity)
+    if options is None:
+        options = SolveOptions(tolerance, max_iterations, load_steps)
+    result = solve_static(body, gravity, initial=initial, options=options)
+    if isinstance(objective, (Target, BoundTarget)):
+        value, dx = bind(objective, body.mesh).misfit(result.positions)
+    elif callable(objective):
+        value, dx = objective(result.positions)
+        dx = np.asarray(dx, dtype=np.float64).reshape(body.mesh.n_nodes, 3)
+    else:
+        raise InputError(f"objective: expected a Target or a callable, got {type(objective).__name__}")
+    # solve_static just left the model at this equilibrium with the body's own parameters.
+    model = body.core_model()
+    core = {k: np.asarray(v) for k, v in model.adjoint(np.ascontiguousarray(dx)).items()}
+    grad = p.pullback(core, theta)
+    return GradientResult(float(value), p.as_dict(grad), core, result)

@@ -1,0 +1,354 @@
+"""The parametrisation of the inverse problems: a vector theta of named parameters -> the core's
+per-element material, gravity and cable values, with the chain rule back and the scaled
+variable ``s`` the optimisers see.
+
+Material names, their conversions (Young's modulus and Poisson's ratio to the Lame parameters)
+and their transforms (log, logit) come from the body's material model declaration
+(:mod:`sorofem.materials`); gravity and the cable values are declared here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..cables import cable_index
+from ..errors import InputError, ParameterError
+from ..materials import IDENTITY, LOG, NEO_HOOKEAN, Form, MaterialModel, Transform
+
+__all__ = ["PARAMETERS", "parameter_names", "Parameters", "Block", "State"]
+
+#: Parameters that are not the material's: gravity (``(3,)``, m/s^2, :func:`sorofem.gradient`
+#: only) and per-cable actuation alpha and segment stiffness (N/m).
+_GRAVITY, _CABLES = "gravity", ("cable_actuation", "cable_stiffness")
+_TRANSFORMS = {_GRAVITY: IDENTITY, "cable_actuation": LOG, "cable_stiffness": LOG}
+_FIELD = "_field"
+
+
+def parameter_names(model: MaterialModel) -> tuple[str, ...]:
+    """The names :func:`sorofem.gradient`, :func:`sorofem.estimate` and :func:`sorofem.control`
+    understand for a body of material ``model``."""
+    return model.estimable() + (_GRAVITY, *_CABLES)
+
+
+#: Parameter names understood by :func:`gradient`, :func:`estimate` and :func:`control` for a
+#: Neo-Hookean body (see the module docstring of :mod:`sorofem.inverse`).
+PARAMETERS: tuple[str, ...] = parameter_names(NEO_HOOKEAN)
+
+
+@dataclass
+class Block:
+    """One named parameter: ``size`` entries of theta from ``offset``."""
+
+    name: str
+    kind: str  # the name without its region
+    elements: NDArray[np.int64]  # elements a material block acts on
+    cables: NDArray[np.int64]  # cables a cable block acts on
+    size: int
+    transform: Transform
+    offset: int = 0
+
+    @property
+    def slice(self) -> slice:
+        return slice(self.offset, self.offset + self.size)
+
+    @property
+    def is_field(self) -> bool:
+        return self.kind.endswith(_FIELD)
+
+
+@dataclass
+class State:
+    """The core's values at a theta: every material parameter per element (the core's own and
+    those of the other forms), gravity (None: the scenario's), cable actuations and stiffnesses."""
+
+    material: dict[str, NDArray[np.float64]]
+    gravity: NDArray[np.float64] | None
+    actuation: NDArray[np.float64]
+    stiffness: NDArray[np.float64]
+
+    def core(self, model: MaterialModel) -> list[NDArray[np.float64]]:
+        """The arguments of the extension's ``Model.set_material``."""
+        return [self.material[name] for name in (*model.core_form.names, "density")]
+
+
+class Parameters:
+    """Named parameter blocks of a body; theta is the concatenation of their values."""
+
+    def __init__(
+        self,
+        body: Any,
+        names: str | Sequence[str],
+        regions: Mapping[str, ArrayLike] | None = None,
+        cables: Sequence[Any] | None = None,
+    ) -> None:
+        if isinstance(names, str):
+            names = [names]
+        if not names:
+            raise InputError("params: expected at least one parameter name")
+        model: MaterialModel = body.material.model
+        known = parameter_names(model)
+        material_names = set(model.estimable())
+        m = body.mesh.n_tets
+        n_cables = len(body.cables)
+        cable_ids = (
+            np.arange(n_cables, dtype=np.int64)
+            if cables is None
+            else np.array([cable_index(body, c) for c in cables], dtype=np.int64)
+        )
+        self.body = body
+        self.model = model
+        self.blocks: list[Block] = []
+        # Per form, the elements its parameters act on: two forms on one element conflict.
+        in_form = {form.names: np.zeros(m, dtype=bool) for form in model.forms}
+        offset = 0
+        for name in names:
+            if not isinstance(name, str):
+                raise InputError(f"params: expected parameter names (str), got {name!r}")
+            kind, _, region = name.partition(":")
+            if kind not in known:
+                raise InputError(f"params: unknown parameter {name!r}; expected one of {list(known)} (material ones optionally ':region')")
+            elements = np.arange(m, dtype=np.int64)
+            if region:
+                if kind not in material_names:
+                    raise InputError(f"params: {kind!r} cannot be restricted to a region ({name!r})")
+                if not regions or region not in regions:
+                    raise InputError(f"params: region {region!r} of {name!r} is not in regions= (given: {sorted(regions or {})})")
+                elements = _element_set(regions[region], m, f"regions[{region!r}]")
+            base = kind.removesuffix(_FIELD)
+            for form in model.forms:
+                if base in form.names:
+                    in_form[form.names][elements] = True
+            if kind in _CABLES:
+                if n_cables == 0:
+                    raise InputError(f"params: {name!r} needs cables; the body has none")
+                size = len(cable_ids)
+            elif kind == _GRAVITY:
+                size = 3
+            elif kind.endswith(_FIELD):
+                size = len(elements)
+            else:
+                size = 1
+            if any(b.name == name for b in self.blocks):
+                raise InputError(f"params: {name!r} given twice")
+            transform = _TRANSFORMS.get(kind) or model.parameter(base).transform
+            self.blocks.append(Block(name, kind, elements, cable_ids, size, transform, offset))
+            offset += size
+        used = [form for form in model.forms if in_form[form.names].any()]
+        for i, a in enumerate(used):
+            for b in used[i + 1:]:
+                if np.any(in_form[a.names] & in_form[b.names]):
+                    raise InputError(
+                        f"params: {a.label()} and {b.label()} act on the same elements; choose one "
+                        f"{'pair' if len(a.names) == 2 else 'set'}"
+                    )
+        self.size = offset
+        #: Per non-core form, the elements whose core values it sets.
+        self.converted: list[tuple[Form, NDArray[np.bool_]]] = [
+            (form, in_form[form.names]) for form in model.forms[1:] if in_form[form.names].any()
+        ]
+        core = dict(zip((*model.core_form.names, "density"), body.material.per_element(m)))
+        self.material0 = dict(core)
+        for form in model.forms[1:]:
+            self.material0.update(zip(form.names, form.from_core(*[core[n] for n in model.core_form.names])))
+        self.alpha0 = np.array(body.actuations, dtype=np.float64)
+        self.k0 = np.array(body.cable_stiffnesses, dtype=np.float64)
+
+    # -- values ---------------------------------------------------------------------------
+
+    def current(self, gravity: ArrayLike | None = None) -> NDArray[np.float64]:
+        """theta of the body as it is (material blocks: the mean over their elements)."""
+        theta = np.zeros(self.size)
+        for b in self.blocks:
+            source = self.material0.get(b.kind.removesuffix(_FIELD))
+            if b.is_field:
+                theta[b.slice] = source[b.elements]
+            elif source is not None:
+                theta[b.slice] = float(np.mean(source[b.elements]))
+            elif b.kind == _GRAVITY:
+                theta[b.slice] = np.zeros(3) if gravity is None else np.asarray(gravity, dtype=np.float64)
+            elif b.kind == "cable_actuation":
+                theta[b.slice] = self.alpha0[b.cables]
+            else:
+                theta[b.slice] = self.k0[b.cables]
+        return theta
+
+    def from_user(self, values: Any, what: str) -> NDArray[np.float64]:
+        """theta from a user's list (one entry per name; arrays for fields, gravity, cables)
+        or dict name -> value."""
+        if isinstance(values, Mapping):
+            values = [values[b.name] if b.name in values else self.current()[b.slice] for b in self.blocks]
+        values = list(np.atleast_1d(np.asarray(values, dtype=object))) if np.ndim(values) <= 1 else list(values)
+        if len(values) != len(self.blocks):
+            # A flat vector of the full size is accepted too.
+            flat = np.asarray(values, dtype=np.float64).reshape(-1)
+            if flat.size == self.size:
+                return flat
+            raise InputError(f"{what}: expected {len(self.blocks)} value(s), one per parameter {self.names}, got {len(values)}")
+        theta = np.zeros(self.size)
+        for b, v in zip(self.blocks, values):
+            arr = np.asarray(v, dtype=np.float64).reshape(-1)
+            if arr.size == 1:
+                arr = np.full(b.size, float(arr[0]))
+            if arr.size != b.size:
+                raise InputError(f"{what}: {b.name!r} expects {b.size} value(s), got {arr.size}")
+            theta[b.slice] = arr
+        return theta
+
+    @property
+    def names(self) -> list[str]:
+        return [b.name for b in self.blocks]
+
+    def as_dict(self, theta: NDArray[np.float64]) -> dict[str, Any]:
+        """name -> float (scalar blocks) or array."""
+        out: dict[str, Any] = {}
+        for b in self.blocks:
+            v = theta[b.slice]
+            out[b.name] = float(v[0]) if b.size == 1 and b.kind not in _CABLES and not b.is_field else v.copy()
+        return out
+
+    def state(self, theta: NDArray[np.float64]) -> State:
+        material = {name: values.copy() for name, values in self.material0.items()}
+        gravity = None
+        alpha, k = self.alpha0.copy(), self.k0.copy()
+        for b in self.blocks:
+            v = theta[b.slice]
+            if b.kind == _GRAVITY:
+                gravity = v.copy()
+            elif b.kind == "cable_actuation":
+                alpha[b.cables] = v
+            elif b.kind == "cable_stiffness":
+                k[b.cables] = v
+            else:
+                material[b.kind.removesuffix(_FIELD)][b.elements] = v if b.is_field else v[0]
+        core_names = self.model.core_form.names
+        for form, elements in self.converted:
+            converted = form.to_core(*[material[n][elements] for n in form.names])
+            for name, values in zip(core_names, converted):
+                material[name][elements] = values
+        return State(material, gravity, alpha, k)
+
+    # -- chain rule -----------------------------------------------------------------------
+
+    def _partials(self, b: Block, st: State) -> dict[str, NDArray[np.float64]]:
+        """d(core parameters)/d theta_b for a scalar material block, per element, by the
+        extension's keys."""
+        m = len(self.material0["density"])
+        el = b.elements
+        spec = self.model.parameter(b.kind)
+        if spec.core_key:  # the core's own parameter, or density
+            d = np.zeros(m)
+            d[el] = 1.0
+            return {spec.core_key: d}
+        form = next(f for f in self.model.forms if b.kind in f.names)
+        row = form.jacobian(*[st.material[n][el] for n in form.names])[form.names.index(b.kind)]  # type: ignore[misc]
+        out = {}
+        for name, derivative in zip(self.model.core_form.names, row):
+            d = np.zeros(m)
+            d[el] = derivative
+            out[self.model.parameter(name).core_key] = d
+        return out
+
+    def pullback(self, adjoint: Mapping[str, Any], theta: NDArray[np.float64]) -> NDArray[np.float64]:
+        """dO/dtheta from the extension's dO/d(core parameters)."""
+        st = self.state(theta)
+        grad = np.zeros(self.size)
+        for b in self.blocks:
+            if b.is_field:
+                key = self.model.parameter(b.kind.removesuffix(_FIELD)).core_key
+                grad[b.slice] = np.asarray(adjoint[key])[b.elements]
+            elif b.kind == _GRAVITY:
+                grad[b.slice] = np.asarray(adjoint["gravity"])
+            elif b.kind in _CABLES:
+                grad[b.slice] = np.asarray(adjoint[b.kind])[b.cables]
+            else:
+                grad[b.offset] = sum(float(np.dot(np.asarray(adjoint[k]), d)) for k, d in self._partials(b, st).items())
+        return grad
+
+    def directions(self, theta: NDArray[np.float64]) -> list[dict[str, Any]]:
+        """One forward-sensitivity direction (the extension's keys) per component of theta."""
+        st = self.state(theta)
+        out: list[dict[str, Any]] = []
+        m = len(self.material0["density"])
+        for b in self.blocks:
+            if b.is_field:
+                key = self.model.parameter(b.kind.removesuffix(_FIELD)).core_key
+                for e in b.elements:
+                    d = np.zeros(m)
+                    d[e] = 1.0
+                    out.append({key: d})
+            elif b.kind == _GRAVITY:
+                out.extend({"gravity": np.eye(3)[i]} for i in range(3))
+            elif b.kind in _CABLES:
+                for c in b.cables:
+                    d = np.zeros(len(self.alpha0))
+                    d[c] = 1.0
+                    out.append({b.kind: d})
+            else:
+                out.append(self._partials(b, st))
+        return out
+
+    # -- scaling: s = transform(theta), block by block --------------------------------------
+
+    def check(self, theta: NDArray[np.float64], what: str) -> None:
+        for b in self.blocks:
+            v = theta[b.slice]
+            if not np.all(b.transform.contains(v)):
+                raise ParameterError(f"{what}: {b.name} must be {b.transform.domain()}, got {v.tolist()}", b.name)
+            if not np.all(np.isfinite(v)):
+                raise ParameterError(f"{what}: {b.name} must be finite, got {v.tolist()}", b.name)
+
+    def to_s(self, theta: NDArray[np.float64]) -> NDArray[np.float64]:
+        s = np.empty(self.size)
+        for b in self.blocks:
+            s[b.slice] = b.transform.to_s(theta[b.slice])
+        return s
+
+    def from_s(self, s: NDArray[np.float64]) -> NDArray[np.float64]:
+        theta = np.empty(self.size)
+        for b in self.blocks:
+            theta[b.slice] = b.transform.from_s(s[b.slice])
+        return theta
+
+    def dtheta_ds(self, s: NDArray[np.float64]) -> NDArray[np.float64]:
+        out = np.empty(self.size)
+        for b in self.blocks:
+            out[b.slice] = b.transform.dtheta_ds(s[b.slice])
+        return out
+
+    def bounds_s(self, bounds: Any) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Bounds in s; user bounds are one (lo, hi) per name (None = open) in theta units. A
+        bound outside the transform's domain (0 for a log parameter) is no bound."""
+        lo, hi = np.full(self.size, -np.inf), np.full(self.size, np.inf)
+        if bounds is None:
+            return lo, hi
+        if isinstance(bounds, Mapping):
+            bounds = [bounds.get(name) for name in self.names]
+        if len(bounds) != len(self.blocks):
+            raise InputError(f"bounds: expected one (lo, hi) per parameter {self.names}, got {len(bounds)}")
+        for b, pair in zip(self.blocks, bounds):
+            if pair is None:
+                continue
+            a, c = pair
+            for value, target in ((a, lo), (c, hi)):
+                if value is None or not b.transform.contains(value):
+                    continue
+                target[b.slice] = b.transform.to_s(np.full(b.size, float(value)))
+        if np.any(lo > hi):
+            raise InputError(f"bounds: lower bound above upper bound for {self.names}")
+        return lo, hi
+
+
+def _element_set(value: ArrayLike, m: int, name: str) -> NDArray[np.int64]:
+    arr = np.asarray(value)
+    if arr.dtype == np.bool_:
+        if arr.shape != (m,):
+            raise InputError(f"{name}: a boolean element mask must have shape ({m},), got {arr.shape}")
+        arr = np.flatnonzero(arr)
+    arr = arr.astype(np.int64).reshape(-1)
+    if arr.size == 0 or arr.min() < 0 or arr.max() >= m:
+        raise InputError(f"{name}: expected a non-empty set of element indices in [0, {m})")
+    return arr

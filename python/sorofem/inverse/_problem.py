@@ -1,0 +1,259 @@
+"""The evaluations of an inverse problem: scenarios (a target, loads and solve options each),
+warm-started static solves of all scenarios at a parameter vector, and the residuals with their
+Jacobian (forward sensitivities or adjoints) or gradient."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import ArrayLike, NDArray
+
+from ..cables import cable_index
+from ..errors import InputError, SolverError
+from ..materials import Material
+from ..progress import Progress
+from ..solver import SolveOptions
+from ..static import StaticResult, solve_static
+from ..targets import BoundTarget, Target
+from ._parameters import Parameters, State
+
+__all__ = ["Scenario", "scenarios", "bind", "Problem", "fitted_material", "final_results", "DEFAULT_TOLERANCE"]
+
+#: Solve options a scenario may carry besides gravity, actuation and target.
+_SOLVE_KEYS = ("tolerance", "max_iterations", "load_steps")
+#: Default Newton tolerance of the inverse functions: tighter than a plain solve's, because
+#: sensitivities are only as accurate as the equilibrium they linearise.
+DEFAULT_TOLERANCE = 1e-10
+
+
+@dataclass
+class Scenario:
+    target: BoundTarget
+    gravity: NDArray[np.float64]
+    actuation: NDArray[np.float64] | None
+    solve: SolveOptions
+    name: str
+    initial: NDArray[np.float64] | None = None  # the warm start of the next solve
+    given_initial: NDArray[np.float64] | None = None  # the user's, where every start begins
+
+
+def bind(target: Any, mesh: Any) -> BoundTarget:
+    """A target bound to ``mesh`` (a :class:`~sorofem.Target`, or one already bound)."""
+    if isinstance(target, BoundTarget):
+        return target
+    if isinstance(target, Target):
+        return target.bind(mesh)
+    raise InputError(f"target: expected a sorofem.Target, got {type(target).__name__}")
+
+
+def scenarios(
+    body: Any, target: Any, scenarios: Sequence[Mapping[str, Any]] | None, gravity: ArrayLike, solve: SolveOptions
+) -> list[Scenario]:
+    """The scenarios of an inverse problem: each one a target bound to the mesh, its gravity,
+    actuation and solve options, from the user's dicts (default: one with ``target`` and
+    ``gravity``)."""
+    specs = list(scenarios) if scenarios else [{}]
+    out = []
+    for i, spec in enumerate(specs):
+        unknown = set(spec) - {"gravity", "actuation", "target", "name", "initial", *_SOLVE_KEYS}
+        if unknown:
+            raise InputError(f"scenarios[{i}]: unknown keys {sorted(unknown)}; expected gravity, actuation, target, name, initial, {', '.join(_SOLVE_KEYS)}")
+        t = spec.get("target", target)
+        if t is None:
+            raise InputError(f"scenarios[{i}]: no target (give target= or a 'target' per scenario)")
+        act = spec.get("actuation")
+        actuation = None
+        if act is not None:
+            actuation = np.array(body.actuations, dtype=np.float64)
+            items = act.items() if isinstance(act, Mapping) else enumerate(np.atleast_1d(act))
+            for c, a in items:
+                actuation[cable_index(body, c)] = float(a)
+        opts = solve.replace(**{k: spec[k] for k in _SOLVE_KEYS if k in spec})
+        initial = spec.get("initial")
+        out.append(
+            Scenario(
+                bind(t, body.mesh),
+                np.asarray(spec.get("gravity", gravity), dtype=np.float64).reshape(3),
+                actuation,
+                opts,
+                str(spec.get("name", f"scenario {i}")),
+                None if initial is None else np.asarray(getattr(initial, "positions", initial), dtype=np.float64),
+            )
+        )
+        out[-1].given_initial = out[-1].initial
+    return out
+
+
+class Problem:
+    """Residuals of all scenarios as a function of s (scaled theta), with their Jacobian
+    (forward sensitivities or adjoints, whichever needs fewer solves) or the gradient of
+    ``1/2 |r|^2`` (one adjoint per scenario). Counts forward (static) solves."""
+
+    def __init__(self, body: Any, params: Parameters, scenarios: list[Scenario], regularization: float = 0.0) -> None:
+        self.body = body
+        self.params = params
+        self.scenarios = scenarios
+        self.model = body.core_model()
+        self.forces, self.prescribed = body.forces, body.prescribed_displacement
+        self.forward_solves = 0
+        self.newton_iterations = 0
+        self.evaluations = 0
+        self.reg = _regularizer(body, params, regularization)
+        self.n_data = sum(sc.target.n_residuals for sc in scenarios)
+        #: Progress line ticked after every forward solve (None: no progress reporting).
+        self.progress: Progress | None = None
+
+    def _tick(self) -> None:
+        if self.progress is not None:
+            self.progress.set(self.forward_solves)
+
+    def _solve(self, sc: Scenario, st: State) -> NDArray[np.float64]:
+        model = self.model
+        model.set_material(*st.core(self.params.model))
+        alpha = st.actuation.copy()
+        if sc.actuation is not None:
+            untouched = np.ones(len(alpha), dtype=bool)
+            for b in self.params.blocks:
+                if b.kind == "cable_actuation":
+                    untouched[b.cables] = False
+            alpha[untouched] = sc.actuation[untouched]
+        for c in range(len(alpha)):
+            model.set_actuation(c, float(alpha[c]))
+            model.set_cable_stiffness(c, float(st.stiffness[c]))
+        g = sc.gravity if st.gravity is None else st.gravity
+        opts = sc.solve
+        attempts = [(sc.initial, opts.load_steps)]
+        if sc.initial is not None:
+            attempts.append((None, opts.load_steps))
+        attempts.append((None, 4 * opts.load_steps))
+        for k, (init, steps) in enumerate(attempts):
+            self.forward_solves += 1
+            try:
+                out = model.solve(
+                    g, self.forces.copy(), self.prescribed.copy(), init, opts.tolerance, opts.max_iterations, steps,
+                )
+            except SolverError:  # no convergence, or a singular (unstable) Hessian
+                self._tick()
+                if k == len(attempts) - 1:
+                    raise
+                continue
+            self._tick()
+            self.newton_iterations += int(out.get("iterations", 0))
+            sc.initial = np.asarray(out["positions"], dtype=np.float64)
+            return sc.initial
+        raise AssertionError("unreachable")
+
+    def evaluate(self, s: NDArray[np.float64], want: str = "residual") -> tuple[NDArray[np.float64], Any]:
+        """``(r, extra)``: extra is the Jacobian dr/ds (``want="jacobian"``), the gradient of
+        ``1/2 |r|^2`` w.r.t. s (``"gradient"``) or None."""
+        p = self.params
+        theta = p.from_s(s)
+        st = p.state(theta)
+        dts = p.dtheta_ds(s)
+        self.evaluations += 1
+        rs, blocks = [], []
+        grad = np.zeros(p.size)
+        for sc in self.scenarios:
+            x = self._solve(sc, st)
+            r = sc.target.residual(x)
+            rs.append(r)
+            if want == "jacobian":
+                Jx = sc.target.jacobian(x)
+                if p.size <= len(r):
+                    cols = []
+                    for d in p.directions(theta):
+                        dx = np.asarray(self.model.forward(d)["dx"]).reshape(-1)
+                        cols.append(Jx @ dx)
+                    J = np.column_stack(cols) if cols else np.zeros((len(r), 0))
+                else:
+                    dense = Jx.toarray()
+                    J = np.vstack([p.pullback(self.model.adjoint(row.reshape(-1, 3)), theta) for row in dense])
+                blocks.append(J * dts[None, :])
+            elif want == "gradient":
+                g = (sc.target.jacobian(x).T @ r).reshape(-1, 3)
+                grad += p.pullback(self.model.adjoint(g), theta) * dts
+        if self.reg is not None:
+            rs.append(self.reg @ s)
+            if want == "jacobian":
+                blocks.append(self.reg.toarray())
+            elif want == "gradient":
+                grad += self.reg.T @ (self.reg @ s)
+        r_all = np.concatenate(rs)
+        if want == "jacobian":
+            return r_all, np.vstack(blocks)
+        if want == "gradient":
+            return r_all, grad
+        return r_all, None
+
+    def restore(self) -> None:
+        """Give the model back the body's own material and cable values."""
+        self.body.core_model()
+
+    def rms(self, r: NDArray[np.float64]) -> float:
+        data = r[: self.n_data]
+        return float(np.sqrt(data @ data / max(self.n_data // 3, 1)))
+
+
+def _regularizer(body: Any, params: Parameters, weight: float) -> sp.csr_matrix | None:
+    """Rows ``sqrt(weight) (s_e - s_f)`` for every pair of face-adjacent elements of each
+    field block: Tikhonov smoothing of log mu (or log lambda) across faces."""
+    if not weight:
+        return None
+    rows, cols, vals = [], [], []
+    row = 0
+    tets = body.mesh.tets
+    for b in params.blocks:
+        if not b.is_field:
+            continue
+        local = {int(e): i for i, e in enumerate(b.elements)}
+        faces: dict[tuple[int, ...], int] = {}
+        for e in b.elements:
+            t = tets[e]
+            for skip in range(4):
+                key = tuple(sorted(int(t[j]) for j in range(4) if j != skip))
+                other = faces.pop(key, None)
+                if other is None:
+                    faces[key] = int(e)
+                else:
+                    rows += [row, row]
+                    cols += [b.offset + local[other], b.offset + local[int(e)]]
+                    vals += [1.0, -1.0]
+                    row += 1
+    if row == 0:
+        return None
+    return sp.csr_matrix((np.sqrt(weight) * np.array(vals), (rows, cols)), shape=(row, params.size))
+
+
+# ---------------------------------------------------------------------------
+
+
+def fitted_material(body: Any, st: State) -> Material:
+    """The material of ``body``'s class with the core's values of ``st`` (scalars where uniform)."""
+
+    def compact(a: NDArray[np.float64]) -> Any:
+        return float(a[0]) if np.all(a == a[0]) else a
+
+    model = body.material.model
+    values = {name: compact(st.material[name]) for name in model.core_form.names}
+    return type(body.material)(**values, density=compact(st.material["density"]))
+
+
+def final_results(body: Any, material: Material, st: State, scs: list[Scenario], p: Parameters) -> list[StaticResult]:
+    """One StaticResult per scenario at the fitted parameters (warm-started, cheap): solved by a
+    copy of ``body`` with ``material`` and the fitted cable values, which shares its model."""
+    fitted = body.replace(material=material)
+    controlled = [c for b in p.blocks if b.kind == "cable_actuation" for c in b.cables]
+    results = []
+    for sc in scs:
+        alpha = st.actuation.copy()
+        if sc.actuation is not None:
+            alpha = np.where(np.isin(np.arange(len(alpha)), controlled), alpha, sc.actuation)
+        for c in range(len(alpha)):
+            fitted.set_actuation(c, float(alpha[c]))
+            fitted.set_cable_stiffness(c, float(st.stiffness[c]))
+        g = sc.gravity if st.gravity is None else st.gravity
+        results.append(solve_static(fitted, g, options=sc.solve, initial=sc.initial))
+    return results

@@ -1,0 +1,459 @@
+"""Every key of a scene file, written once, as data: its type, range, default, meaning, units and
+the value the annotated example shows.
+
+The validator (:meth:`sorofem.Scene.from_toml`), :func:`json_schema` (``docs/scene.schema.json``,
+``sorofem schema``), the annotated schema in :mod:`sorofem.scene`'s docstring and README.md's key
+table (:mod:`sorofem.scene.generate`) all read :data:`SCENE`. Where the values are declared
+elsewhere they are read from there: material parameters from :mod:`sorofem.materials`, solver
+options from :class:`sorofem.solver.SolveOptions`, cable options from :class:`sorofem.Cable`,
+formulations from :mod:`sorofem.body`, estimable parameters from :mod:`sorofem.inverse`.
+"""
+
+from __future__ import annotations
+
+import inspect
+import json
+from dataclasses import fields
+from pathlib import Path
+from typing import Any
+
+from .._validate import Range
+from ..body import FORMULATIONS, PRESSURE_MASSES, VOLUMETRIC_MEASURES, Body
+from ..cables import OUTSIDE_MODES, Cable
+from ..inverse import parameter_names
+from ..materials import DENSITY, MODELS, NEO_HOOKEAN, MaterialModel, Parameter
+from ..mesh import Mesh
+from ..plot import COLOR_FIELDS
+from ..solver import SolveOptions
+from ._spec import (
+    NO_DEFAULT,
+    Array,
+    Boolean,
+    Checker,
+    Choice,
+    Either,
+    Field,
+    Group,
+    Integer,
+    Number,
+    String,
+    Table,
+    Tables,
+    Tuple,
+)
+
+__all__ = ["SCENE", "TOP_KEYS", "MATERIAL_KEYS", "CABLE_OPTIONS", "json_schema", "schema_text", "defaults"]
+
+_VEC3 = Array(Number(), 3, 3)
+_POINTS = Array(_VEC3, 1, noun="[x, y, z] points")
+_NODES = Array(Integer(ge=0), 1)
+#: Names of regions and of ``"shear_modulus:NAME"`` parameters.
+_NAME = r"[A-Za-z_][A-Za-z0-9_\-]*"
+_BOX_HINT = " like { min = [x, y, z], max = [x, y, z] }"
+
+
+def _box(what: str) -> Table:
+    return Table(
+        {
+            "min": Field(_VEC3, "lowest corner", "m", required=True),
+            "max": Field(_VEC3, "highest corner (>= min)", "m", required=True),
+        },
+        hint=_BOX_HINT,
+        doc=f"Closed axis-aligned box: {what} inside it (boundary included).",
+    )
+
+
+_NODE_BOX = _box("the nodes")
+_SELECT_NODES = Choice((Group(("nodes",)), Group(("box",))))
+
+# -- [material]: from the model declarations ---------------------------------------------------
+
+
+def _parameter_doc(model: MaterialModel, p: Parameter) -> str:
+    """``Young's modulus E (with poisson_ratio)``, plus any stricter range of a formulation."""
+    partners = next((f.names for f in model.forms if p.name in f.names), (p.name,))
+    others = [n for n in partners if n != p.name]
+    text = f"{p.doc} {p.symbol}"
+    for formulation, strict in p.formulation_ranges:
+        text += f", {strict.describe()} for kind = \"{formulation}\""
+    return text + (f" (with {', '.join(others)})" if others else "")
+
+
+def _material_values(live: dict[str, Any], commented: dict[str, Any] | None = None) -> dict[str, Field]:
+    """A Field per parameter of every model, the forms' order reversed (Young's modulus first),
+    shown in the annotated example live (``live``), commented out (``commented``) or not at all."""
+    commented = commented or {}
+    out: dict[str, Field] = {}
+    for model in MODELS.values():
+        for form in model.forms[::-1]:
+            for name in form.names:
+                p = model.parameter(name)
+                example = live.get(name, commented.get(name, NO_DEFAULT))
+                out.setdefault(name, Field(
+                    Number(p.range), _parameter_doc(model, p), p.units, example=example, commented=name not in live,
+                ))
+    return out
+
+
+#: Every way to give a material, over all models: exactly one per table.
+_MATERIAL_FORMS = tuple(Group(form.names) for model in MODELS.values() for form in model.forms[::-1])
+#: The material values a table may hold (every model's parameters, and density).
+MATERIAL_KEYS = tuple(_material_values({})) + (DENSITY.name,)
+
+_REGION = Table(
+    {
+        "name": Field(
+            String(pattern=_NAME, pattern_doc="a name of letters, digits, '_' and '-'"),
+            "name of the region, unique; [estimate] params may then name it, e.g. \"shear_modulus:NAME\"",
+            example="tip",
+        ),
+        "box": Field(_box("the elements whose centroid lies"), "select the elements whose centroid is in this box",
+                     "m", example={"min": [0.3, -1, -1], "max": [0.4, 1, 1]}),
+        "cells": Field(Array(Integer(ge=0), 1), "select these elements (tetrahedron indices, 0-based)",
+                       example=[0, 1, 2], commented=True),
+        **_material_values({"youngs_modulus": 132e3}),
+        "density": Field(Number(DENSITY.range), "density rho of these elements", DENSITY.units),
+    },
+    choices=(
+        Choice((Group(("box",)), Group(("cells",)))),
+        Choice(_MATERIAL_FORMS, required=False, partial=True),
+    ),
+    doc="Other material values for some elements; values not given are the [material] table's, and a later "
+    "entry overrides an earlier one where they overlap.",
+)
+
+_MATERIAL = Table(
+    {
+        "model": Field(String(tuple(MODELS)), "the material model (sorofem.materials.MODELS)",
+                       default=NEO_HOOKEAN.name),
+        **_material_values({"youngs_modulus": 66e3, "poisson_ratio": 0.45},
+                           {"shear_modulus": 22.76e3, "lame_lambda": 0.2048e6}),
+        "density": Field(
+            Number(DENSITY.range), "density rho (only matters under gravity and in dynamics)", DENSITY.units,
+            default=0.0, example=1080,
+        ),
+        "region": Field(
+            Tables(_REGION, "material.region"),
+            "[[material.region]] entries: per-element materials (see the entry's description)",
+            default=[], see=("Materials per region", "#materials-per-region"),
+        ),
+    },
+    choices=(Choice(_MATERIAL_FORMS),),
+    doc="The material: " + "; ".join(
+        f"{m.title}, exactly one of " + " or ".join(" + ".join(f.names) for f in m.forms[::-1])
+        for m in MODELS.values()
+    ) + ".",
+)
+
+# -- the other sections ------------------------------------------------------------------------
+
+_MESH = Table(
+    {
+        "file": Field(String(), "mesh file, relative to the scene file: .tet or any volume format meshio reads",
+                      example="beam.vtu"),
+        "box": Field(
+            Table(
+                {
+                    "size": Field(Array(Number(Range(gt=0)), 3, 3), "edge lengths [x, y, z]", "m", required=True,
+                                  example=[1.0, 0.1, 0.1]),
+                    "cells": Field(Array(Integer(ge=1), 3, 3), "hexahedral cells along x, y, z (6 tets each)",
+                                   required=True, example=[8, 2, 2]),
+                    "origin": Field(_VEC3, "lowest corner", "m", default=[0.0, 0.0, 0.0]),
+                },
+                hint=" like { size = [1, 0.1, 0.1], cells = [8, 2, 2] }",
+                doc="A box meshed with nx * ny * nz hexahedra of 6 tetrahedra each.",
+            ),
+            "a box mesh instead of a file", example={"size": [1.0, 0.1, 0.1], "cells": [8, 2, 2]}, commented=True,
+        ),
+        "surface": Field(
+            String(), "closed triangle surface (.stl, .obj, .ply, .off), relative to the scene file, filled with "
+            "tetrahedra by sf.tetrahedralize (fTetWild: the optional extra 'mesh')", example="robot.stl", commented=True,
+            see=("From a surface to a simulation", "#from-a-surface-to-a-simulation"),
+        ),
+        "edge_length": Field(
+            Number(Range(gt=0)), "target edge length of the tetrahedra filling surface, after scale (default: 1/20 of "
+            "the bounding-box diagonal)", "m", example=0.004, commented=True,
+        ),
+        "scale": Field(Number(Range(gt=0)), "multiplies all coordinates (for box: size and origin)", default=1.0),
+        "axes": Field(
+            Array(String(Mesh.AXIS_NAMES), 3, 3),
+            "after scale, new axis i is old axis axes[i], with its sign: a signed permutation of x, y, z; "
+            "[\"x\", \"-z\", \"y\"] turns a y-up mesh into a z-up one",
+            default=["x", "y", "z"], see=("Axes", "#axes"),
+        ),
+    },
+    choices=(Choice((Group(("file",)), Group(("box",)), Group(("surface",), ("edge_length",)))),),
+    doc="The tetrahedral mesh: exactly one of file, box or surface.",
+)
+
+#: Defaults of the formulation options: sorofem.Body's own.
+_BODY_DEFAULTS = {
+    name: p.default for name, p in inspect.signature(Body.__init__).parameters.items() if p.default is not p.empty
+}
+
+_FORMULATION = Table(
+    {
+        "kind": Field(String(FORMULATIONS), "displacement only (\"standard\") or displacement + nodal pressure "
+                      "(\"mixed\", no locking as nu -> 0.5)", default=_BODY_DEFAULTS["formulation"],
+                      see=("Formulations", "#formulations")),
+        "volumetric": Field(
+            String(VOLUMETRIC_MEASURES), "volumetric measure c(J): ln J (\"log\") or J - 1 (\"linear\")",
+            default=_BODY_DEFAULTS["volumetric"],
+        ),
+        "pressure_mass": Field(String(PRESSURE_MASSES), "pressure mass matrix of the mixed formulation",
+                               default=_BODY_DEFAULTS["pressure_mass"]),
+    },
+    doc="Finite element formulation.",
+)
+
+_FIXED = Table(
+    {
+        "nodes": Field(_NODES, "node indices, 0-based", example=[0, 1, 2], commented=True),
+        "box": Field(_NODE_BOX, "the nodes inside this closed box", "m",
+                     example={"min": [-1e-9, -1, -1], "max": [1e-9, 1, 1]}),
+        "displacement": Field(_VEC3, "prescribed displacement of the selected nodes", "m", default=[0.0, 0.0, 0.0]),
+    },
+    choices=(_SELECT_NODES,),
+    doc="Supports: exactly one of nodes or box; each entry must select at least one node.",
+)
+# Listed before box so that the annotated example shows nodes = [...] live.
+_FORCE = Table(
+    {
+        "nodes": Field(_NODES, "node indices, 0-based", example=[5, 6]),
+        "box": Field(_NODE_BOX, "the nodes inside this closed box", "m"),
+        "force": Field(_VEC3, "force added to each selected node", "N", required=True, example=[0, 0, -0.1]),
+    },
+    choices=(_SELECT_NODES,),
+    hint=" like { nodes = [..], force = [fx, fy, fz] }",
+    doc="A nodal force: exactly one of nodes or box, and force.",
+)
+
+_LOADS = Table(
+    {
+        "gravity": Field(_VEC3, "acceleration of gravity", "m/s^2", default=[0.0, 0.0, 0.0], example=[0, 0, -9.81]),
+        "forces": Field(Tables(_FORCE, "loads.forces", sections=False), "nodal forces, N per node", default=[]),
+    },
+    doc="External loads.",
+)
+
+#: [solver]: the fields of sorofem.solver.SolveOptions.
+_SOLVER = Table(
+    {
+        f.name: Field(
+            Integer(ge=int(f.metadata["range"].ge)) if f.metadata["integer"] else Number(f.metadata["range"]),
+            f.metadata["doc"], default=f.default,
+        )
+        for f in fields(SolveOptions)
+    },
+    doc="Newton solver options (sorofem.solver.SolveOptions).",
+)
+
+#: Defaults of the cable options: sorofem.Cable's own.
+_CABLE_DEFAULTS = {
+    name: p.default for name, p in inspect.signature(Cable.__init__).parameters.items() if p.default is not p.empty
+}
+#: The [[cable]] keys that are keyword arguments of sorofem.Cable (the others place the points).
+CABLE_OPTIONS = ("stiffness", "actuation", "transition", "anchor_first", "snap_tolerance", "outside", "free_node_mass",
+                 "damping")
+
+_CABLE = Table(
+    {
+        "points": Field(Array(_VEC3, 2, noun="[x, y, z] points"), "the cable's points at rest", "m",
+                        example=[[0, 0.01, 0.01], [0.2, 0.01, 0.01], [0.4, 0.01, 0.01]], commented=True),
+        "start": Field(_VEC3, "first point of a straight cable", "m", example=[0, 0.01, 0.01]),
+        "direction": Field(_VEC3, "direction of a straight cable (any non-zero length)", example=[1, 0, 0]),
+        "length": Field(Number(Range(gt=0)), "length of a straight cable", "m", example=0.4),
+        "divisions": Field(Integer(ge=1), "equal segments of a straight cable", example=10),
+        "stiffness": Field(Number(Range(gt=0)), "stiffness of each segment spring", "N/m", required=True,
+                           missing="the stiffness of each segment, N/m", example=1e5),
+        "actuation": Field(Number(Range(gt=0)), "alpha: segment rest lengths are scaled by it (1 rest, < 1 pulled)",
+                           default=_CABLE_DEFAULTS["actuation"], example=0.8),
+        "transition": Field(Number(Range(gt=0, lt=1)), "width of the smooth slack-taut transition, fraction of a "
+                            "segment's rest length", default=_CABLE_DEFAULTS["transition"]),
+        "anchor_first": Field(Boolean(), "the first point is fixed in the world (a motor)",
+                              default=_CABLE_DEFAULTS["anchor_first"]),
+        "snap_tolerance": Field(Number(Range(ge=0)), "points this far outside the mesh attach to the nearest tet",
+                                "m", default=_CABLE_DEFAULTS["snap_tolerance"]),
+        "outside": Field(String(OUTSIDE_MODES), "points farther outside are an error, or free nodes with their "
+                         "own mass", default=_CABLE_DEFAULTS["outside"]),
+        "free_node_mass": Field(Number(Range(ge=0)), "mass of each free node", "kg",
+                                default=_CABLE_DEFAULTS["free_node_mass"]),
+        "damping": Field(Number(Range(ge=0)), "dashpot of each segment: a force damping * dL/dt in time "
+                         "integration (static solves are unaffected)", "N s/m", default=_CABLE_DEFAULTS["damping"]),
+    },
+    choices=(Choice((Group(("points",)), Group(("start", "direction", "length", "divisions")))),),
+    doc="A cable of unilateral springs embedded in the mesh (sorofem.Cable): points, or start + direction + length "
+    "+ divisions.",
+)
+
+_DYNAMICS = Table(
+    {
+        "dt": Field(Number(Range(gt=0)), "time step", "s", required=True, example=0.01),
+        "steps": Field(Integer(ge=1), "number of time steps", required=True, example=200),
+        "mass_damping": Field(Number(Range(ge=0)), "Rayleigh alpha_M", "1/s", default=0.0),
+        "stiffness_damping": Field(Number(Range(ge=0)), "Rayleigh beta_K", "s", default=0.0),
+        "save_every": Field(Integer(ge=1), "write a frame every this many steps (plus the first and last)",
+                            default=1),
+        "initial": Field(String(("rest", "static")), "start at rest from the rest shape, or from the static "
+                         "equilibrium (loads, actuations)", default="rest"),
+        "actuation": Field(
+            Array(Array(Tuple((Number(), Number(Range(gt=0))), "[time, alpha]"), 1, noun="[time, alpha] pairs"),
+                  indexed=True),
+            "one array of [time, alpha] keyframes per [[cable]], linearly interpolated and held outside their "
+            "range (default: each cable keeps its actuation)",
+            "s, -", default=None, example=[[[0.0, 1.0], [0.5, 0.8]]],
+        ),
+    },
+    doc="Integrate in time (implicit Euler, lumped mass; density > 0) instead of a static solve.",
+)
+
+_TARGET = Table(
+    {
+        "nodes": Field(_NODES, "observed mesh nodes (with positions)", example=[17, 18, 19]),
+        "points": Field(_POINTS, "observed marker points at rest, inside the mesh (with positions)", "m",
+                        example=[[0.1, 0.01, 0.01]], commented=True),
+        "positions": Field(_POINTS, "goal position of each node or point", "m",
+                           example=[[0.1, 0, -0.01], [0.1, 0.02, -0.01], [0.1, 0.02, 0.01]]),
+        "positions_file": Field(
+            String(), "the goal positions from a file instead, relative to the scene file: .npy (k, 3) or a .csv / "
+            ".txt table with columns x, y, z (sorofem.io.read_points)", example="markers.csv", commented=True,
+        ),
+        "surface": Field(String(), "goal surface file, relative to the scene file", example="goal.obj",
+                         commented=True),
+        "scale": Field(Number(Range(gt=0)), "coordinate scale of the surface files", default=1.0, commented=True),
+        "rest": Field(String(), "the body's own rest surface (default: the mesh boundary)", example="rest.obj",
+                      commented=True),
+    },
+    choices=(
+        Choice((
+            Group(("nodes",), ("positions", "positions_file")), Group(("points",), ("positions", "positions_file")),
+            Group(("surface",), ("scale", "rest")),
+        )),
+        Choice((Group(("positions",)), Group(("positions_file",))), required=False),
+    ),
+    doc="Where parts of the body should be (sorofem.Target), for sorofem estimate / control: exactly one of nodes, "
+    "points or surface; nodes and points with positions or positions_file.",
+)
+
+#: Parameter names [estimate] accepts (sorofem.inverse's for every model), material ones optionally ":REGION".
+_PARAMETERS = tuple(dict.fromkeys(n for model in MODELS.values() for n in parameter_names(model)))
+_MATERIAL_PARAMETERS = tuple(dict.fromkeys(n for model in MODELS.values() for n in model.estimable()))
+_ESTIMATE = Table(
+    {
+        "params": Field(
+            Array(String(_PARAMETERS, pattern=f"(?:{'|'.join(_MATERIAL_PARAMETERS)}):{_NAME}",
+                         pattern_doc="a material one followed by ':REGION' (a named [[material.region]])"), 1),
+            "names of the parameters to fit (sorofem.inverse.PARAMETERS); a material one may name a region, "
+            "\"shear_modulus:tip\"",
+            required=True, example=["shear_modulus", "lame_lambda"],
+        ),
+        "x0": Field(Array(Either((Number(), Array(Number(), 1))), 1),
+                    "initial values, one per parameter (an array for a field)", required=True, example=[20e3, 0.2e6]),
+        "bounds": Field(Array(Tuple((Number(), Number()), "[lo, hi]"), 1), "one [lo, hi] per parameter",
+                        default=None, example=[[1e3, 1e6], [1e3, 1e8]]),
+        "method": Field(String(("least-squares", "l-bfgs-b", "nelder-mead")), "optimiser", default="least-squares"),
+        "starts": Field(Integer(ge=0), "number of extra random starts", default=0),
+    },
+    doc="sorofem estimate (sorofem.estimate): fit these parameters so that the equilibrium meets [target].",
+)
+
+_CONTROL = Table(
+    {
+        "cables": Field(Array(Integer(ge=0), 1), "indices of the [[cable]] entries to actuate (default: all)",
+                        default=None, example=[0]),
+        "bounds": Field(Array(Tuple((Number(Range(gt=0)), Number(Range(gt=0))), "[lo, hi]"), 1),
+                        "one actuation range [lo, hi] per cable (default [0.3, 1])", default=None,
+                        example=[[0.3, 1.0]]),
+        "method": Field(String(("l-bfgs-b", "nelder-mead")), "optimiser", default="l-bfgs-b"),
+    },
+    doc="sorofem control (sorofem.control): find cable actuations that bring [target] closest.",
+)
+
+#: The files `sorofem run` writes, each switchable in [output] (defaults: all of them).
+_OUTPUT = Table(
+    {
+        "directory": Field(
+            String(), "output folder, relative to the scene file (created); `--out DIR` on the command line "
+            "overrides it", example="results/beam",
+        ),
+        "summary": Field(Boolean(), "write summary.json (solver report, timings, material, extreme values)",
+                         default=True),
+        "vtu": Field(Boolean(), "write result.vtu (the rest mesh with point data displacement, pressure and cell "
+                     "data J, von Mises: Warp By Vector in ParaView shows the deformed body)", default=True),
+        "deformed": Field(Boolean(), "also write deformed.vtu: the same data on the deformed mesh (to open without a "
+                          "filter; do not warp it again)", default=False),
+        "png": Field(Boolean(), "write the figures: shape.png and convergence.png, trajectory.png with "
+                     "[dynamics], fit.png (and profile.png) for estimate and control", default=True),
+        "cables": Field(Boolean(), "write cables.vtu (the cables as lines with their tension; static scenes "
+                        "with [[cable]] entries)", default=True),
+        "pvd": Field(Boolean(), "write trajectory.pvd and its frames in trajectory/ (scenes with [dynamics])",
+                     default=True),
+        "color_by": Field(
+            String(COLOR_FIELDS), "field that colours the deformed surface in shape.png: displacement magnitude, "
+            "von Mises stress, pressure (kind = \"mixed\" only) or the volume ratio J", default="displacement",
+        ),
+    },
+    doc="What sorofem run writes and where (every file but deformed.vtu is on by default); estimate and control "
+    "also follow directory, summary, vtu and png.",
+)
+
+SCENE = Table(
+    {
+        "mesh": Field(_MESH, "the mesh", required=True, missing="a scene needs a [mesh] table"),
+        "material": Field(_MATERIAL, "the material", required=True, missing="a scene needs a [material] table"),
+        "formulation": Field(_FORMULATION, "the formulation"),
+        "fixed": Field(
+            Tables(_FIXED, "fixed", min_items=1, note=": an unsupported body has no equilibrium"),
+            "[[fixed]] entries: supports and prescribed displacements",
+            required=True,
+            missing="a scene needs a [[fixed]] entry",
+        ),
+        "loads": Field(_LOADS, "gravity and nodal forces"),
+        "solver": Field(_SOLVER, "Newton options"),
+        "cable": Field(Tables(_CABLE, "cable"), "[[cable]] entries", default=[]),
+        "dynamics": Field(_DYNAMICS, "time integration instead of a static solve"),
+        "target": Field(_TARGET, "target of sorofem estimate / control"),
+        "estimate": Field(_ESTIMATE, "sorofem estimate options"),
+        "control": Field(_CONTROL, "sorofem control options"),
+        "output": Field(_OUTPUT, "what sorofem run writes, and where"),
+    },
+    doc="A sorofem scene: one simulation (mesh, material, supports, loads, solver, cables, dynamics, the "
+    "target of an estimate or control, and the outputs).",
+)
+#: The scene's top-level tables, in file order.
+TOP_KEYS = tuple(SCENE.fields)
+
+
+def defaults(name: str) -> Any:
+    """The table ``name`` (a key of :data:`SCENE`) with every default filled in, as the
+    validator returns it for an empty table."""
+    return SCENE.fields[name].spec.check(Checker(Path(), ""), {}, name)
+
+
+def json_schema() -> dict[str, Any]:
+    """The JSON Schema (draft 2020-12) of scene files, from the same definitions the validator uses.
+
+    Editors use it to complete and check scene files (``#:schema ./scene.schema.json`` as the
+    first line of a scene, for VS Code's Even Better TOML or taplo). It checks structure, types,
+    ranges and allowed values; the checks that need the mesh or other files (indices in range,
+    boxes that select something, files that exist, one value per cable or parameter) are only
+    done by :meth:`Scene.load`.
+
+    Examples
+    --------
+    >>> import json, sorofem as sf
+    >>> schema = sf.scene.json_schema()
+    >>> schema["$schema"], schema["properties"]["material"]["properties"]["poisson_ratio"]["exclusiveMaximum"]
+    ('https://json-schema.org/draft/2020-12/schema', 0.5)
+    >>> text = json.dumps(schema, indent=2)   # what `sorofem schema` prints
+    """
+    return {
+        "$schema": "https://json-schema.org/draft/2020-12/schema",
+        "title": "sorofem scene file",
+        **SCENE.schema(),
+    }
+
+
+def schema_text() -> str:
+    """:func:`json_schema` as the text of ``sorofem schema`` and ``docs/scene.schema.json``."""
+    return json.dumps(json_schema(), indent=2) + "\n"

@@ -1,0 +1,256 @@
+"""The scene: a whole simulation read from a TOML file, built into a body with its loads, cables,
+dynamics, target and outputs."""
+
+from __future__ import annotations
+
+import os
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..body import Body
+from ..cables import Cable
+from ..dynamics import Trajectory, simulate
+from ..errors import InputError, ParameterError, SceneError
+from ..materials import Material
+from ..mesh import Mesh
+from ..solver import SolveOptions
+from ..static import StaticResult, solve_static
+from ..targets import Target
+from ._build import (
+    apply_cables,
+    apply_fixed,
+    apply_loads,
+    build_control,
+    build_dynamics,
+    build_estimate,
+    build_material,
+    build_mesh,
+    build_output,
+    build_target,
+)
+from ._keys import SCENE, defaults
+from ._spec import Checker
+
+__all__ = ["Scene"]
+
+
+@dataclass
+class Scene:
+    """A static simulation read from a TOML scene file (schema in the module docstring).
+
+    Attributes
+    ----------
+    path
+        The scene file.
+    mesh, material, body
+        The model, with the ``[[fixed]]`` conditions and ``[loads].forces`` applied to ``body``.
+        With ``[[material.region]]`` entries ``material`` holds per-element arrays.
+    formulation
+        ``[formulation].kind``.
+    formulation_options
+        ``[formulation]`` ``volumetric`` and ``pressure_mass`` (keyword arguments of
+        :class:`sorofem.Body`), defaults filled in.
+    gravity
+        ``(3,)`` m/s^2.
+    solve_options
+        ``[solver]``: the :class:`sorofem.solver.SolveOptions` of every solve of the scene.
+
+    Examples
+    --------
+    >>> import sorofem as sf
+    >>> scene = sf.Scene.load("cantilever.toml")  # doctest: +SKIP
+    >>> result = scene.solve()                    # doctest: +SKIP
+    """
+
+    path: Path
+    mesh: Mesh
+    material: Material
+    body: Body
+    formulation: str
+    gravity: np.ndarray
+    solve_options: SolveOptions = field(default_factory=SolveOptions)
+    formulation_options: dict[str, str] = field(
+        default_factory=lambda: {k: v for k, v in defaults("formulation").items() if k != "kind"}
+    )
+    #: The ``[[cable]]`` entries, added to ``body`` (see :class:`sorofem.Cable`).
+    cables: list[Cable] = field(default_factory=list)
+    #: ``[dynamics]`` with defaults filled in (``actuation``: a list of
+    #: :class:`sorofem.dynamics.Keyframes` per cable, or None), or None for a static scene.
+    dynamics: dict[str, Any] | None = None
+    #: ``[target]`` as a :class:`sorofem.Target`, or None.
+    target: Target | None = None
+    #: ``[estimate]``: ``params``, ``x0``, ``bounds``, ``method``, ``starts`` (None when absent), or None.
+    estimate: dict[str, Any] | None = None
+    #: ``[control]``: ``cables`` (indices), ``bounds``, ``method``, or None.
+    control: dict[str, Any] | None = None
+    #: Named ``[[material.region]]`` entries: name -> indices of the elements that have the
+    #: entry's material (those no later entry overrides); the ``regions=`` of
+    #: :func:`sorofem.estimate` for ``"shear_modulus:NAME"`` parameters.
+    regions: dict[str, np.ndarray] = field(default_factory=dict)
+    #: Per element, the index of the ``[[material.region]]`` entry that set its material, or -1
+    #: for ``[material]`` itself; ``(n_tets,)`` int64, or None without regions.
+    material_region: np.ndarray | None = None
+    #: ``[output]`` with defaults filled in: ``directory`` (a Path, resolved against the scene
+    #: file's folder, or None), the switches ``summary``, ``vtu``, ``png``, ``cables``, ``pvd``
+    #: (booleans) and ``color_by``.
+    output: dict[str, Any] = field(default_factory=lambda: {**defaults("output"), "directory": None})
+    #: The files the scene reads: itself, the mesh file and the ``[target]`` surface files
+    #: (``sorofem run`` never writes over them).
+    input_files: list[Path] = field(default_factory=list)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> "Scene":
+        """Read, validate and build a scene.
+
+        Raises
+        ------
+        SceneError
+            Anything wrong in the file, with ``path``, ``key`` and ``line``.
+        FileNotFoundError
+            The scene file itself does not exist.
+        """
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"scene file not found: {path}")
+        try:
+            text = path.read_text(encoding="utf-8")
+        except UnicodeDecodeError as exc:
+            raise SceneError(f"not a UTF-8 text file ({exc})", path=path) from None
+        return cls.from_toml(text, path)
+
+    @classmethod
+    def from_toml(cls, text: str, path: str | os.PathLike[str]) -> "Scene":
+        """Build a scene from TOML text; relative mesh paths are resolved against ``path``'s folder."""
+        path = Path(path)
+        check = Checker(path, text)
+        try:
+            raw = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            match = re.search(r"line (\d+)", str(exc))
+            raise SceneError(
+                f"invalid TOML: {exc}", path=path, line=int(match.group(1)) if match else None
+            ) from None
+        # Structure, types, ranges and allowed values (everything json_schema() says), with
+        # defaults filled in; then what needs the mesh and the other files.
+        data = SCENE.check(check, raw, "")
+        for name in ("formulation", "loads", "solver", "output"):
+            if name not in data:
+                data[name] = SCENE.fields[name].spec.check(check, {}, name)
+
+        mesh = build_mesh(check, data["mesh"], path.parent)
+        formulation = data["formulation"]["kind"]
+        options = {k: v for k, v in data["formulation"].items() if k != "kind"}
+        material, regions, owner = build_material(check, data["material"], mesh, formulation)
+        try:
+            body = Body(mesh, material, formulation=formulation, **options)
+        except ParameterError as exc:
+            raise check.error(f"material.{exc.parameter or 'youngs_modulus'}", str(exc)) from None
+        apply_fixed(check, data["fixed"], body)
+        gravity = apply_loads(check, data["loads"], body)
+        cables = apply_cables(check, data["cable"], body)
+        dynamics = build_dynamics(check, data["dynamics"], body) if "dynamics" in data else None
+        target, target_files = None, []
+        if "target" in data:
+            target, target_files = build_target(check, data["target"], body, path.parent)
+        estimate = build_estimate(check, data["estimate"], regions) if "estimate" in data else None
+        control = build_control(check, data["control"], body) if "control" in data else None
+        output = build_output(check, data["output"], formulation, path.parent)
+        return cls(
+            path=path,
+            mesh=mesh,
+            material=material,
+            body=body,
+            formulation=formulation,
+            gravity=gravity,
+            solve_options=SolveOptions(**data["solver"]),
+            formulation_options=options,
+            cables=cables,
+            dynamics=dynamics,
+            target=target,
+            estimate=estimate,
+            control=control,
+            regions=regions,
+            material_region=owner,
+            output=output,
+            input_files=[p for p in (path, mesh.source, *target_files) if p is not None],
+        )
+
+    @property
+    def solver(self) -> dict[str, Any]:
+        """``[solver]`` as keyword arguments of :func:`sorofem.solve_static` (``tolerance``,
+        ``max_iterations``, ``load_steps``): :attr:`solve_options` as a dict."""
+        return self.solve_options.to_dict()
+
+    def solve(self, *, body: Body | None = None, initial: StaticResult | None = None) -> StaticResult:
+        """Run :func:`sorofem.solve_static` with the scene's loads and solver options (on
+        ``body`` instead of ``scene.body`` if given, warm-started from ``initial``)."""
+        return solve_static(self.body if body is None else body, self.gravity, initial=initial,
+                            options=self.solve_options)
+
+    def simulate(
+        self, *, body: Body | None = None, equilibrium: StaticResult | None = None, progress: bool | None = None
+    ) -> Trajectory:
+        """Run :func:`sorofem.simulate` with the scene's ``[dynamics]`` (from the rest shape,
+        or from :meth:`solve`'s equilibrium with ``initial = "static"``).
+
+        Parameters
+        ----------
+        body
+            Integrate this body instead of ``scene.body`` (the viewer passes its own, with the
+            formulation and cable actuations set in the page); cables without keyframes hold
+            its actuations.
+        equilibrium
+            With ``initial = "static"``: the equilibrium of ``body`` to start from, if already
+            solved (default: solved here). Ignored with ``initial = "rest"``.
+        progress
+            See :func:`sorofem.simulate`.
+
+        Raises
+        ------
+        InputError
+            The scene has no ``[dynamics]`` table.
+        """
+        if self.dynamics is None:
+            raise InputError(f"{self.path}: the scene has no [dynamics] table")
+        d = self.dynamics
+        body = self.body if body is None else body
+        initial = None
+        if d["initial"] == "static":
+            initial = equilibrium if equilibrium is not None else self.solve(body=body)
+        return simulate(
+            body, d["dt"], d["steps"], actuation=d["actuation"], gravity=self.gravity,
+            damping=(d["mass_damping"], d["stiffness_damping"]), initial=initial, save_every=d["save_every"],
+            tolerance=self.solve_options.tolerance, max_iterations=self.solve_options.max_iterations,
+            progress=progress,
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain summary of the scene's settings."""
+        return {
+            "scene": str(self.path),
+            "mesh": None if self.mesh.source is None else str(self.mesh.source),
+            "formulation": self.formulation,
+            "formulation_options": self.body.formulation_options,
+            "material": self.material.to_dict(),
+            "material_regions": None if self.material_region is None else {
+                "elements_per_entry": np.bincount(self.material_region + 1).tolist()[1:],
+                "named": {name: int(e.size) for name, e in self.regions.items()},
+            },
+            "gravity": self.gravity.tolist(),
+            "fixed_nodes": int(self.body.fixed_nodes.size),
+            "solver": self.solve_options.to_dict(),
+            "cables": [c.to_dict() for c in self.cables],
+            "dynamics": None if self.dynamics is None else {
+                **self.dynamics,
+                "actuation": None if self.dynamics["actuation"] is None else [
+                    np.column_stack([k.times, k.values]).tolist() for k in self.dynamics["actuation"]
+                ],
+            },
+            "output": {**self.output, "directory": None if self.output["directory"] is None
+                       else str(self.output["directory"])},
+        }

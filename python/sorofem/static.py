@@ -1,0 +1,434 @@
+"""The static solve: :func:`solve_static`, its :class:`StaticResult`, and quasi-static actuation
+of cables by continuation (:func:`actuate`).
+
+Examples
+--------
+>>> import sorofem as sf
+>>> mesh = sf.Mesh.box(size=(1.0, 0.1, 0.1), cells=(8, 2, 2))
+>>> body = sf.Body(mesh, sf.NeoHookean(youngs_modulus=66e3, poisson_ratio=0.45, density=1080))
+>>> body.fix(mesh.nodes_in_box(min=(-1e-9, -1, -1), max=(1e-9, 1, 1)))
+>>> result = sf.solve_static(body, gravity=(0, 0, -9.81))
+>>> result.displacement.shape
+(81, 3)
+>>> result.report.converged
+True
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from functools import cached_property
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ._text import plural
+from ._validate import as_finite, describe, real
+from .body import Body
+from .cables import DEFAULT_ALPHA_STEP, MAX_HALVINGS, Cable, cable_index, check_actuation, placement_counts
+from .errors import ConvergenceError, InputError, ParameterError
+from .io import result_mesh
+from .progress import Progress
+from .solver import SolveOptions, SolveReport
+
+__all__ = ["StaticResult", "solve_static", "actuate"]
+
+
+class StaticResult:
+    """Equilibrium of a body, returned by :func:`solve_static`.
+
+    Attributes
+    ----------
+    mesh
+        The body's mesh (rest configuration).
+    positions
+        Deformed node positions, ``(n_nodes, 3)``, m.
+    displacement
+        ``positions - mesh.points``, ``(n_nodes, 3)``, m.
+    pressure
+        Nodal pressure ``(n_nodes,)`` in Pa for mixed formulations, ``None`` for ``"standard"``.
+        It is the multiplier of the volume constraint, ``p ~ lambda c(J)``: positive where
+        the material is stretched in volume (the mean Cauchy stress is ``p / J``).
+        Equal-order P1-P1 is not inf-sup stable: as nu -> 0.5 the nodal pressure can
+        oscillate (on coarse meshes even flip sign across a bent beam) while the
+        displacement stays accurate; judge pressures on refined meshes.
+    report
+        The :class:`SolveReport`.
+
+    The element fields :attr:`J` and :attr:`von_mises` are computed when the result is made,
+    from the model that just solved: reading them later never touches that model (which may
+    have solved for another material meanwhile).
+
+    Volume bookkeeping (both formulations): :attr:`J` per tetrahedron,
+    :attr:`deformed_volumes`, :attr:`volume_change` and :attr:`mean_log_j`.
+    """
+
+    def __init__(
+        self,
+        body: Body,
+        positions: NDArray[np.float64],
+        pressure: NDArray[np.float64] | None,
+        report: SolveReport,
+        reactions: NDArray[np.float64] | None = None,
+        cable_points: Sequence[ArrayLike] | None = None,
+        cable_tensions: Sequence[ArrayLike] | None = None,
+        element_fields: Mapping[str, ArrayLike] | None = None,
+    ) -> None:
+        self.body = body
+        #: Current position of every cable point, one ``(k, 3)`` array per cable (m).
+        self.cable_points = [np.asarray(p, dtype=np.float64).reshape(-1, 3) for p in cable_points or []]
+        #: Tension of every cable segment, one ``(k - 1,)`` array per cable (N, >= 0).
+        self.cable_tensions = [np.asarray(t, dtype=np.float64).reshape(-1) for t in cable_tensions or []]
+        #: The actuation alpha of each cable at this solve.
+        self.actuations = body.actuations
+        #: The segment stiffness of each cable at this solve, N/m.
+        self.stiffnesses = body.cable_stiffnesses
+        #: Support reactions ``(n_fixed, 3)`` in N, one row per entry of ``body.fixed_nodes``:
+        #: the force each support exerts on the body (they balance the applied loads).
+        self.reactions = None if reactions is None else np.asarray(reactions, dtype=np.float64)
+        self.mesh = body.mesh
+        self.positions = np.asarray(positions, dtype=np.float64)
+        self.displacement = self.positions - self.mesh.points
+        self.pressure = None if pressure is None else np.asarray(pressure, dtype=np.float64)
+        self.report = report
+        #: The body's formulation, its options and its material at this solve (the body may change later).
+        self.formulation = body.formulation
+        self.formulation_options = body.formulation_options
+        self.material = body.material
+        if element_fields is None:
+            # Only the model that just solved holds this solve's material for sure.
+            element_fields = body.core_model().element_fields(self.positions)
+        self._fields = {k: np.asarray(v, dtype=np.float64) for k, v in element_fields.items()}
+
+    @property
+    def J(self) -> NDArray[np.float64]:  # noqa: N802 - the standard symbol
+        """Volume ratio ``det F`` per tetrahedron, ``(n_tets,)``."""
+        return self._fields["J"]
+
+    @property
+    def von_mises(self) -> NDArray[np.float64]:
+        """Von Mises equivalent of the Cauchy stress per tetrahedron, ``(n_tets,)``, Pa."""
+        return self._fields["von_mises"]
+
+    @cached_property
+    def deformed_volumes(self) -> NDArray[np.float64]:
+        """Signed volume of each deformed tetrahedron, ``(n_tets,)``, m^3 (from the positions)."""
+        x = self.positions[self.mesh.tets]
+        edges = x[:, 1:] - x[:, :1]
+        return np.einsum("ij,ij->i", edges[:, 0], np.cross(edges[:, 1], edges[:, 2])) / 6.0
+
+    @property
+    def volume_change(self) -> float:
+        """Relative change of the total volume, ``(V_deformed - V_rest) / V_rest``."""
+        rest = self.mesh.volumes
+        return float((self.deformed_volumes - rest).sum() / rest.sum())
+
+    @property
+    def mean_log_j(self) -> float:
+        """Volume-weighted mean of ``ln J``, ``sum_e V_e ln J_e / V`` (rest volumes): the
+        quantity the ``"log"`` volumetric measure keeps near 0 as nu -> 0.5."""
+        rest = self.mesh.volumes
+        with np.errstate(divide="ignore", invalid="ignore"):
+            log_j = np.log(self.deformed_volumes / rest)
+        return float((rest * log_j).sum() / rest.sum())
+
+    @property
+    def anchor_reactions(self) -> list[NDArray[np.float64] | None]:
+        """Per cable, the force ``(3,)`` in N that its world anchor (``anchor_first=True``: the
+        motor) exerts on the cable, ``-T_0 (y_1 - y_0) / |y_1 - y_0|`` with ``T_0`` the first
+        segment's tension; ``None`` for a cable without an anchor. With the support
+        ``reactions`` and the applied loads it closes the body's force balance."""
+        out: list[NDArray[np.float64] | None] = []
+        for cable, points, tensions in zip(self.body.cables, self.cable_points, self.cable_tensions):
+            if not cable.anchor_first:
+                out.append(None)
+                continue
+            direction = points[1] - points[0]
+            length = float(np.linalg.norm(direction))
+            out.append(-tensions[0] * direction / length if length > 0 else np.zeros(3))
+        return out
+
+    @property
+    def max_displacement(self) -> float:
+        """Largest nodal displacement magnitude, m."""
+        return float(np.linalg.norm(self.displacement, axis=1).max(initial=0.0))
+
+    def to_dict(self) -> dict[str, Any]:
+        """Summary for ``summary.json``: plain JSON types only."""
+        return {
+            "converged": self.report.converged,
+            "newton_iterations": self.report.iterations,
+            "residual_norm": self.report.residual_norm,
+            "max_displacement": self.max_displacement,
+            "timings": dict(self.report.timings),
+            "n_nodes": self.mesh.n_nodes,
+            "n_tets": self.mesh.n_tets,
+            "formulation": self.formulation,
+            "formulation_options": self.formulation_options,
+            "material": self.material.to_dict(),
+            "min_J": float(self.J.min()),
+            "max_J": float(self.J.max()),
+            "volume_change": self.volume_change,
+            "mean_log_j": self.mean_log_j,
+            "min_pressure": None if self.pressure is None else float(self.pressure.min()),
+            "max_pressure": None if self.pressure is None else float(self.pressure.max()),
+            "max_von_mises": float(self.von_mises.max()),
+            **self._cables_dict(),
+            "report": self.report.to_dict(),
+        }
+
+    def to_meshio(self, points: str = "rest") -> Any:
+        """The result as a :class:`meshio.Mesh` (what ``result.vtu`` holds): the rest points
+        (``points="deformed"``: the deformed ones), point data ``displacement`` (m) and
+        ``pressure`` (Pa, mixed formulation), cell data ``J`` and ``von_mises`` (Pa).
+
+        Examples
+        --------
+        >>> mesh = result.to_meshio()                                 # doctest: +SKIP
+        >>> mesh.write("result.xdmf")                                 # doctest: +SKIP
+        """
+        return result_mesh(self, points=points)
+
+    def to_pyvista(self, points: str = "rest") -> Any:
+        """The result as a :class:`pyvista.UnstructuredGrid` (through :meth:`to_meshio`), for
+        plotting in Python; ``grid.warp_by_vector("displacement")`` gives the deformed body.
+        PyVista is optional: ``pip install pyvista`` (or the extra: ``pip install ".[pyvista]"``).
+
+        Raises
+        ------
+        ImportError
+            PyVista is not installed (the message says how to install it).
+
+        Examples
+        --------
+        >>> grid = result.to_pyvista()                                # doctest: +SKIP
+        >>> grid.warp_by_vector("displacement").plot(scalars="von_mises")   # doctest: +SKIP
+        """
+        try:
+            import pyvista
+        except ModuleNotFoundError as exc:
+            if exc.name != "pyvista":
+                raise
+            raise ImportError("StaticResult.to_pyvista needs PyVista, which is not installed: pip install pyvista "
+                              "(or use StaticResult.to_meshio(), which needs nothing more)") from None
+        return pyvista.from_meshio(self.to_meshio(points))
+
+    def _cables_dict(self) -> dict[str, Any]:
+        """``{"cables": [...]}`` (tensions, actuation, point placements) when the body has cables."""
+        if not self.body.cables:
+            return {}
+        placements = self.body.cable_placements()
+        anchors = self.anchor_reactions + [None] * len(self.body.cables)
+        return {
+            "cables": [
+                {
+                    "actuation": alpha,
+                    "stiffness": stiffness,
+                    "rest_length": cable.length,
+                    "tensions": self.cable_tensions[c].tolist() if c < len(self.cable_tensions) else None,
+                    "max_tension": float(self.cable_tensions[c].max()) if c < len(self.cable_tensions) else None,
+                    "anchor_reaction": None if anchors[c] is None else anchors[c].tolist(),
+                    "placements": [p.kind for p in placements[c]],
+                    "placement_counts": placement_counts(placements[c]),
+                }
+                for c, (cable, alpha, stiffness) in enumerate(zip(self.body.cables, self.actuations, self.stiffnesses))
+            ]
+        }
+
+    def __repr__(self) -> str:
+        return (
+            f"StaticResult(converged={self.report.converged}, iterations={self.report.iterations}, "
+            f"max_displacement={self.max_displacement:.4g})"
+        )
+
+
+def solve_static(
+    body: Body,
+    gravity: ArrayLike = (0.0, 0.0, 0.0),
+    *,
+    tolerance: float = 1e-8,
+    max_iterations: int = 50,
+    load_steps: int = 1,
+    initial: ArrayLike | StaticResult | None = None,
+    progress: bool | None = None,
+    options: SolveOptions | None = None,
+) -> StaticResult:
+    """Static equilibrium of a body under gravity, nodal forces and prescribed displacements.
+
+    Newton's method with a line search minimises the total potential energy; loads are
+    applied in ``load_steps`` equal increments (the solver may cut a step back).
+
+    Parameters
+    ----------
+    body
+        The body, with its boundary conditions and forces.
+    gravity
+        Acceleration ``(3,)``, m/s^2.
+    tolerance
+        Relative residual norm at which Newton stops.
+    max_iterations
+        Newton iterations allowed per load step.
+    load_steps
+        Number of load increments.
+    options
+        The three options above as one :class:`SolveOptions` (what a scene passes); when given,
+        it replaces ``tolerance``, ``max_iterations`` and ``load_steps``.
+    initial
+        Initial guess of the deformed **positions** ``(n_nodes, 3)`` (or a previous
+        :class:`StaticResult`); default: the rest shape.
+    progress
+        A line on stderr with the elapsed time while the solve runs (``None``: only on a
+        terminal and only for solves longer than half a second; see :mod:`sorofem.progress`),
+        then the iterations and load steps it took.
+
+    Returns
+    -------
+    StaticResult
+
+    Raises
+    ------
+    ConvergenceError
+        Newton did not converge; ``err.report`` is a :class:`SolveReport`.
+
+    Examples
+    --------
+    >>> import sorofem as sf
+    >>> mesh = sf.Mesh.box(size=(1.0, 0.1, 0.1), cells=(8, 2, 2))
+    >>> body = sf.Body(mesh, sf.NeoHookean(youngs_modulus=66e3, poisson_ratio=0.45, density=1080))
+    >>> body.fix(mesh.nodes_in_box(min=(-1e-9, -1, -1), max=(1e-9, 1, 1)))
+    >>> result = sf.solve_static(body, gravity=(0, 0, -9.81))
+    >>> bool(result.displacement[:, 2].min() < 0)
+    True
+    """
+    if not isinstance(body, Body):
+        raise InputError(f"body: expected a sorofem.Body, got {describe(body)}")
+    g = as_finite(gravity, "gravity", (3,))
+    if options is None:
+        options = SolveOptions(tolerance, max_iterations, load_steps)
+    elif not isinstance(options, SolveOptions):
+        raise InputError(f"options: expected a sorofem.solver.SolveOptions, got {describe(options)}")
+    n = body.mesh.n_nodes
+    if isinstance(initial, StaticResult):
+        initial = initial.positions
+    x0 = None if initial is None else as_finite(initial, "initial", (n, 3))
+
+    model = body.core_model()
+    # The core solves in one call (the GIL released): the line can only show the elapsed time.
+    with Progress(total=1, desc="static solve", unit="solve", enabled=progress) as bar:
+        try:
+            out = model.solve(g, body.forces, body.prescribed_displacement, x0, options.tolerance,
+                              options.max_iterations, options.load_steps)
+        except ConvergenceError as err:
+            if isinstance(err.report, dict):
+                err.report = SolveReport.from_dict(err.report, body.formulation)
+            raise
+        report = SolveReport.from_dict(out, body.formulation)
+        bar.set(1, postfix=f"{plural(report.iterations, 'Newton iteration')}, {plural(report.load_steps, 'load step')}, "
+                           f"{plural(report.cutbacks, 'cutback')}")
+    positions = out["positions"]
+    return StaticResult(
+        body, positions, out.get("pressure"), report, reactions=out.get("reactions"),
+        cable_points=out.get("cable_points"), cable_tensions=out.get("cable_tensions"),
+        element_fields=model.element_fields(positions),
+    )
+
+
+def actuate(
+    body: Body,
+    cable: Cable | int,
+    alphas: float | Sequence[float],
+    gravity: ArrayLike = (0.0, 0.0, 0.0),
+    *,
+    max_step: float = DEFAULT_ALPHA_STEP,
+    initial: ArrayLike | StaticResult | None = None,
+    tolerance: float = 1e-8,
+    max_iterations: int = 50,
+) -> list[StaticResult]:
+    """Pull (or release) a cable quasi-statically by continuation in its actuation alpha.
+
+    Each alpha of the path is solved with :func:`sorofem.solve_static`, warm-started from the
+    previous equilibrium. A step that does not converge is halved (up to
+    :data:`sorofem.cables.MAX_HALVINGS` times) and the intermediate equilibria are kept in the path.
+
+    Parameters
+    ----------
+    body
+        The body; ``cable`` must have been added to it.
+    cable
+        A :class:`Cable` of the body or its index.
+    alphas
+        The path: a sequence of alphas solved in turn, or a single target alpha, reached in
+        equal steps of at most ``max_step`` from the cable's current actuation.
+    gravity
+        ``(3,)``, m/s^2.
+    max_step
+        Largest alpha increment of a path built from a single target.
+    initial
+        Starting positions ``(n_nodes, 3)`` or a :class:`StaticResult` for the first solve
+        (default: the rest shape).
+    tolerance, max_iterations
+        Passed to :func:`sorofem.solve_static`.
+
+    Returns
+    -------
+    list of StaticResult
+        One per solved alpha (``result.actuations`` records them), the target last. The
+        body's actuation is left at the last alpha.
+
+    Raises
+    ------
+    ConvergenceError
+        A step failed even after halving; ``err.results`` holds the equilibria reached.
+
+    Examples
+    --------
+    >>> results = sf.actuate(body, cable, 0.5, gravity=(0, 0, -9.81))  # doctest: +SKIP
+    >>> results[-1].cable_tensions[0]                                  # doctest: +SKIP
+    """
+    index = cable_index(body, cable)
+    if isinstance(alphas, numbers.Real) and not isinstance(alphas, bool):
+        target = check_actuation(alphas, "alphas")
+        step = real(max_step, "max_step", minimum=0.0, strict=True)
+        start = body.actuations[index]
+        n = max(1, math.ceil(abs(target - start) / step - 1e-12))
+        path = [start + (target - start) * (i + 1) / n for i in range(n)]
+    else:
+        try:
+            path = [check_actuation(a, f"alphas[{i}]") for i, a in enumerate(alphas)]  # type: ignore[union-attr]
+        except TypeError:
+            raise ParameterError(f"alphas: expected a number or a sequence of numbers, got {describe(alphas)}", "alphas") from None
+        if not path:
+            raise ParameterError("alphas: expected at least one alpha", "alphas")
+
+    results: list[StaticResult] = []
+    previous: Any = initial.positions if isinstance(initial, StaticResult) else initial
+    current = body.actuations[index]
+    for target in path:
+        halvings = 0
+        while True:
+            # Retry from the last equilibrium with half the increment until it converges.
+            trial = target if halvings == 0 else current + (target - current) / 2**halvings
+            body.set_actuation(index, trial)
+            try:
+                result = solve_static(
+                    body, gravity, tolerance=tolerance, max_iterations=max_iterations, initial=previous
+                )
+            except ConvergenceError as err:
+                halvings += 1
+                if halvings > MAX_HALVINGS:
+                    body.set_actuation(index, current)
+                    err.results = results  # type: ignore[attr-defined]
+                    raise ConvergenceError(
+                        f"actuate: no equilibrium at alpha = {trial:g} after halving the step from "
+                        f"alpha = {current:g} {MAX_HALVINGS} times: {err}",
+                        err.report,
+                    ) from err
+                continue
+            results.append(result)
+            previous, current = result.positions, trial
+            if trial == target:
+                break
+            halvings = max(0, halvings - 1)
+    return results

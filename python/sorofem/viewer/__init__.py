@@ -1,0 +1,128 @@
+"""Interactive 3-D views in the browser (``sorofem view``), built on viser: a scene's static
+equilibrium with live cable sliders, or the playback of a time integration.
+
+The view shows the deformed boundary surface coloured by displacement magnitude (viridis, scaled
+to the current maximum) or, chosen in the "colour by" dropdown, by von Mises stress, pressure
+(mixed formulation) or J (diverging maps centred on 0 and 1), the cables as red polylines, the fixed nodes as blue points and,
+optionally, the rest shape. The control panel has one slider per cable that sets its actuation
+alpha and re-solves, warm-started from the last equilibrium (``body.set_actuation(i, alpha)``,
+then :func:`sorofem.solve_static` with ``initial=`` the last result; a jump that does not
+converge is retried by continuation, :func:`sorofem.actuate`), and a dropdown that switches
+between the standard and the mixed formulation. A scene with ``[dynamics]`` is shown at its
+static equilibrium, and its button "simulate [dynamics]" (:meth:`View.simulate`; disabled, with
+a hint, when the scene has none) integrates the motion with the formulation and cable
+actuations set in the page and plays it in the same page with the playback controls below,
+until "back to static" (:meth:`View.show_static`). A trajectory of your own plays with
+:func:`view_trajectory`.
+
+**Playback** (:func:`build_trajectory_view`, :func:`view_trajectory`): a
+:class:`~sorofem.Trajectory` returned by :func:`sorofem.simulate`, or the ``.pvd`` series that
+:meth:`~sorofem.Trajectory.write_pvd` and ``sorofem run`` write, is shown frame by frame with a
+frame slider, a play/pause button, the playback speed (multiples of real time) and a loop
+toggle. Each frame moves the vertices of the one surface mesh, the cables and the
+displacement-coloured surface nodes (one colour scale, 0 .. the largest displacement of the
+whole motion); nothing is re-created.
+
+Needs the optional extra ``viewer`` (viser, trimesh): ``pip install ".[viewer]"`` from a checkout
+of sorofem (README, "Install"). :func:`build_view` takes any
+``viser.ViserServer``, so it runs without a browser (that is how it is tested); ``_cli`` starts the
+server and waits.
+
+Examples
+--------
+>>> import viser                                             # doctest: +SKIP
+>>> import sorofem as sf
+>>> from sorofem.viewer import build_view
+>>> server = viser.ViserServer(host="127.0.0.1", port=8080)  # doctest: +SKIP
+>>> view = build_view(sf.Scene.load("examples/scenes/cable_cantilever.toml"), server)  # doctest: +SKIP
+>>> view.sliders[0].value = 0.7     # re-solves, as dragging the slider does  # doctest: +SKIP
+>>> view.result.actuations                                   # doctest: +SKIP
+[0.7]
+>>> motion = view.simulate()     # a scene with [dynamics]: as the button; plays  # doctest: +SKIP
+>>> view.show_static()           # as "back to static"       # doctest: +SKIP
+
+Play a motion (serves on http://127.0.0.1:8080 until Ctrl-C):
+
+>>> from sorofem.viewer import view_trajectory
+>>> trajectory = sf.simulate(body, dt=0.01, steps=200, gravity=(0, 0, -9.81))  # doctest: +SKIP
+>>> view_trajectory(trajectory)                              # doctest: +SKIP
+>>> view_trajectory("results/run")   # a run's folder, or results/run/trajectory.pvd  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from .._deprecated import moved
+from ..errors import InputError
+from ..scene import Scene
+from . import serving
+from .colours import COLOR_FIELDS, colour_by_magnitude, colour_field, nodal_field
+from .frames import Frames, load_frames
+from .playback import TrajectoryView, build_trajectory_view, view_trajectory
+from .static_view import View, build_view, rebuild_body
+
+__all__ = [
+    "View",
+    "build_view",
+    "colour_by_magnitude",
+    "COLOR_FIELDS",
+    "nodal_field",
+    "colour_field",
+    "rebuild_body",
+    "Frames",
+    "load_frames",
+    "TrajectoryView",
+    "build_trajectory_view",
+    "view_trajectory",
+    "serve",
+]
+
+
+def serve(path: str | os.PathLike[str], host: str = "127.0.0.1", port: int = 8080, trajectory: bool = False) -> int:
+    """``sorofem view PATH``: serve a view until interrupted (Ctrl-C); returns the exit code 0.
+
+    ``PATH`` is a scene (its static equilibrium with cable sliders; with ``trajectory=True`` its
+    ``[dynamics]`` are simulated and played), a ``.pvd`` time series, or a folder holding
+    ``trajectory.pvd`` (``sorofem run``'s ``--out`` folder), which is played.
+    """
+    viser = serving.require_viser()
+    path = Path(path)
+    playback = path.is_dir() or path.suffix.lower() == ".pvd"
+    if playback:
+        source: Any = load_frames(path)
+    else:
+        scene = Scene.load(path)
+        if trajectory:
+            if scene.dynamics is None:
+                raise InputError(f"{path}: --trajectory needs a [dynamics] table in the scene")
+            source = Frames.from_trajectory(scene.simulate(), source=str(path))
+    server = viser.ViserServer(host=host, port=port, verbose=False)
+    on_stop = None
+    try:
+        if playback or trajectory:
+            view = build_trajectory_view(source, server, play=True)
+            on_stop = view.close
+            what = f"{path} ({view.frames.n_frames} frames)"
+        else:
+            build_view(scene, server)
+            what = str(path)
+    except BaseException:
+        server.stop()
+        raise
+    print(f"sorofem view: {what} at http://{host}:{server.get_port()} (Ctrl-C to stop)", flush=True)
+    serving.wait_until_interrupted(server, on_stop)
+    return 0
+
+
+#: Old private name of :func:`serve`.
+_cli = serve
+
+__getattr__ = moved(__name__, {"COLOUR_FIELDS": (lambda: COLOR_FIELDS, "sorofem.plot.COLOR_FIELDS")})
+
+# Documented (and pickled) as members of this package, whichever module holds them.
+for _public in (View, build_view, colour_by_magnitude, nodal_field, colour_field, rebuild_body, Frames, load_frames,
+                TrajectoryView, build_trajectory_view, view_trajectory):
+    _public.__module__ = __name__

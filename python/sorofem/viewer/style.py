@@ -1,0 +1,20 @@
+"""Colours, ranges and speeds of the viewer's controls."""
+
+from __future__ import annotations
+
+__all__ = ["ALPHA_RANGE", "ALPHA_STEP", "CABLE_COLOUR", "FIXED_COLOUR", "REST_COLOUR", "SURFACE_COLOUR", "SPEEDS",
+           "PLAYBACK_FPS", "SIMULATE_LABEL"]
+
+#: Actuation range of the cable sliders (widened to include a scene's own actuation).
+ALPHA_RANGE = (0.3, 1.2)
+ALPHA_STEP = 0.005
+CABLE_COLOUR = (220, 40, 40)
+FIXED_COLOUR = (40, 90, 230)
+REST_COLOUR = (180, 180, 180)
+SURFACE_COLOUR = (120, 170, 215)
+#: Playback speeds offered, in multiples of real time.
+SPEEDS = (0.01, 0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0, 100.0)
+#: Most frames per second the playback sends to the browser (denser frames are skipped).
+PLAYBACK_FPS = 30.0
+#: Label of the scene view's button that simulates the scene's [dynamics] and plays the motion.
+SIMULATE_LABEL = "simulate [dynamics]"
