@@ -73,6 +73,16 @@ def test_a_nan_in_any_block_fails():
     assert not check_jacobian(nan_in_one_row, X0, A).passed
 
 
+def test_an_exact_zero_block_passes_with_no_absolute_tolerance():
+    """0 / 0 is an exact match, not a NaN; a wrong entry in that block still fails."""
+    decoupled = A.copy()
+    decoupled[:2, 2:] = decoupled[2:, :2] = 0.0
+    assert check_jacobian(lambda x: decoupled @ x, X0, decoupled, blocks=BLOCKS, row_blocks=BLOCKS, atol=0.0).passed
+    wrong = decoupled.copy()
+    wrong[0, 2] = 1e-12
+    assert not check_jacobian(lambda x: decoupled @ x, X0, wrong, blocks=BLOCKS, row_blocks=BLOCKS, atol=0.0).passed
+
+
 def test_blocks_must_be_disjoint_and_inside():
     with pytest.raises(ValueError, match="blocks"):
         check_jacobian(linear, X0, A, blocks=[[0, 1], [1, 2]])

@@ -118,3 +118,33 @@ fn a_nan_anywhere_fails() {
         1e-15,
     );
 }
+
+/// An exact all-zero block with `atol = 0` passes (its tolerance is 0, so the error ratio was
+/// 0 / 0 = NaN, which failed the Mooney-Rivlin `d1` column of `dW_rest/dtheta`).
+#[test]
+fn an_exact_zero_block_passes_with_no_absolute_tolerance() {
+    let (mut a, labels) = two_scale_matrix();
+    for (i, j) in [
+        (0, 2),
+        (0, 3),
+        (1, 2),
+        (1, 3),
+        (2, 0),
+        (2, 1),
+        (3, 0),
+        (3, 1),
+    ] {
+        a[4 * i + j] = 0.0;
+    }
+    check_jacobian_blocks(
+        "zero block",
+        &[0.3, -0.2, 0.7, 0.1],
+        1e-6,
+        |x| apply(&a, x),
+        &a,
+        &labels,
+        &labels,
+        1e-6,
+        0.0,
+    );
+}

@@ -97,8 +97,14 @@ pub fn check_jacobian_blocks(
         for i in 0..m {
             let fd = (fp[i] - fm[i]) / (2.0 * step);
             let block_scale = scale[&(row_block[i], col_block[j])];
-            let ratio = (fd - jac[i * n + j]).abs() / (rtol * block_scale + atol);
-            // A NaN (from either side) is the worst of all.
+            let error = (fd - jac[i * n + j]).abs();
+            // An exact match passes even where the tolerance is 0 (an all-zero block with
+            // atol = 0); a NaN (from either side) is the worst of all.
+            let ratio = if error == 0.0 {
+                0.0
+            } else {
+                error / (rtol * block_scale + atol)
+            };
             if ratio.is_nan() || ratio > worst.0 {
                 worst = (ratio, i, j, fd, jac[i * n + j], block_scale);
             }
