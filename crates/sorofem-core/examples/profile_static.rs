@@ -4,7 +4,7 @@
 //! cargo run --release --example profile_static -- ../shared/data/solidfem/hammerbot_fine.tet 0.01
 use sorofem_core::assembly::Assembler;
 use sorofem_core::energy::{ElasticTerm, Formulation as ElementFormulation, HessianMode};
-use sorofem_core::linear::SparseFactor;
+use sorofem_core::linear::{FactorKind, SparseFactor};
 use sorofem_core::material::{neo_hookean::lame_from_young, Volumetric};
 use sorofem_core::{Formulation, Loads, Material, Model, Orientation, SolveOptions, TetMesh};
 use std::sync::Arc;
@@ -76,6 +76,10 @@ fn main() {
         model.n_free(),
         t.elapsed().as_secs_f64()
     );
+    // PROFILE_GENERAL=1: the element kernels' general path instead of the Neo-Hookean closed
+    // forms (what models without closed forms cost).
+    let general = std::env::var_os("PROFILE_GENERAL").is_some();
+    model.set_closed_forms(!general);
     model
         .set_material(&Material {
             mu: vec![mu; m],
@@ -128,14 +132,14 @@ fn main() {
     }
     // Isolated kernels.
     let n = mesh.n_nodes();
-    let term = ElasticTerm {
-        mesh: mesh.clone(),
-        mu: vec![mu; m],
-        lambda: vec![lambda; m],
-        volumetric: Volumetric::Log,
-        formulation: ElementFormulation::Standard,
-        pressure_iterates: None,
-    };
+    let mut term = ElasticTerm::neo_hookean(
+        mesh.clone(),
+        &vec![mu; m],
+        &vec![lambda; m],
+        Volumetric::Log,
+        ElementFormulation::Standard,
+    );
+    term.closed_forms = !general;
     let mut fixed_dofs = vec![false; 3 * n];
     for &i in &fixed {
         fixed_dofs[3 * i as usize..3 * i as usize + 3].fill(true);
@@ -190,7 +194,7 @@ fn main() {
         t.elapsed().as_secs_f64() * 1e3 / reps as f64
     );
     let t = Instant::now();
-    let mut factor = SparseFactor::analyse(assembler.pattern()).unwrap();
+    let mut factor = SparseFactor::analyse(assembler.pattern(), FactorKind::Llt).unwrap();
     println!(
         "analyse     {:.3} ms, factor nnz {}",
         t.elapsed().as_secs_f64() * 1e3,
@@ -198,7 +202,7 @@ fn main() {
     );
     let t = Instant::now();
     for _ in 0..reps {
-        assert!(factor.factor_llt(assembler.pattern(), &h).unwrap());
+        assert!(factor.factor(assembler.pattern(), &h).unwrap());
     }
     println!(
         "llt         {:.3} ms",
@@ -210,7 +214,7 @@ fn main() {
         let e = assembler.evaluate(&[&term], &deformed, true, Some(HessianMode::Exact));
         t_h += t.elapsed().as_secs_f64();
         let t = Instant::now();
-        assert!(factor.factor_llt(assembler.pattern(), &e.hessian).unwrap());
+        assert!(factor.factor(assembler.pattern(), &e.hessian).unwrap());
         t_f += t.elapsed().as_secs_f64();
     }
     println!(

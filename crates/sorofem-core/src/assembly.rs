@@ -663,14 +663,13 @@ mod tests {
     fn chunks_of_one_colour_share_no_free_dof() {
         let mesh = Arc::new(TetMesh::box_mesh([1.0, 0.2, 0.1], [20, 4, 2], [0.0; 3]).unwrap());
         let m = mesh.n_tets();
-        let term = ElasticTerm {
-            mesh: mesh.clone(),
-            mu: vec![1.0; m],
-            lambda: vec![1.0; m],
-            volumetric: Volumetric::Log,
-            formulation: Formulation::Standard,
-            pressure_iterates: None,
-        };
+        let term = ElasticTerm::neo_hookean(
+            mesh.clone(),
+            &vec![1.0; m],
+            &vec![1.0; m],
+            Volumetric::Log,
+            Formulation::Standard,
+        );
         let mut fixed = vec![false; 3 * mesh.n_nodes()];
         fixed[..9].fill(true);
         let assembler = Assembler::new(&fixed, &[&term]);

@@ -1,7 +1,7 @@
 //! The one error type of the core. Every message names the parameter, what was expected and what
 //! was given, so that the Python layer can show it unchanged.
 
-use crate::newton::SolveReport;
+use crate::report::SolveReport;
 use std::fmt;
 
 pub type Result<T> = std::result::Result<T, Error>;
@@ -46,7 +46,12 @@ pub enum Error {
         message: String,
         report: Box<SolveReport>,
     },
-    /// The sparse factorisation failed for a reason other than indefiniteness.
+    /// A linear solve is impossible: the sparse analysis or factorisation failed (out of
+    /// memory, a bad elimination order), or a matrix that must be definite is not: the
+    /// projected Hessian in Newton (a body free to move rigidly, a free cable node held by no
+    /// taut segment) or the Hessian at an equilibrium for sensitivities (an unstable one).
+    /// An indefinite exact Hessian during Newton is no error: Newton falls back to the
+    /// projected one.
     LinearSolver { message: String },
 }
 
@@ -64,6 +69,22 @@ impl Error {
             param: param.into(),
             expected: expected.into(),
             given: given.to_string(),
+        }
+    }
+
+    /// The error of a per-tet value, saying which tet: `given` gains " at tet {e}".
+    pub fn at_tet(self, e: usize) -> Self {
+        match self {
+            Error::InvalidParameter {
+                param,
+                expected,
+                given,
+            } => Error::InvalidParameter {
+                param,
+                expected,
+                given: format!("{given} at tet {e}"),
+            },
+            other => other,
         }
     }
 }

@@ -87,6 +87,16 @@ enum Stored {
     Ldlt,
 }
 
+/// Which factorisation a [`SparseFactor`] computes, fixed at its analysis.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FactorKind {
+    /// `L L^T`: symmetric positive definite matrices (the standard formulation's Hessian). Fails
+    /// on the first non-positive pivot, which is how Newton tells an indefinite Hessian.
+    Llt,
+    /// `L D L^T` without pivoting: quasi-definite saddle-point matrices (the mixed formulation).
+    Ldlt,
+}
+
 /// A reusable sparse Cholesky (`L L^T`, for positive definite systems) or `L D L^T` (for
 /// quasi-definite saddle-point systems `[[A, B^T], [B, -C]]`, A and C positive definite).
 ///
@@ -95,6 +105,7 @@ enum Stored {
 /// copies the values through that map instead of having faer permute (and re-sort) the whole
 /// matrix every time (5 % of a hammerbot solve's profile).
 pub struct SparseFactor {
+    kind: FactorKind,
     symbolic: SymbolicCholesky<usize>,
     values: Vec<f64>,
     stored: Stored,
@@ -115,14 +126,18 @@ pub struct SparseFactor {
 
 impl SparseFactor {
     /// Symbolic analysis with an approximate-minimum-degree ordering.
-    pub fn analyse(pattern: &LowerPattern) -> Result<Self> {
-        Self::analyse_with_order(pattern, &amd_order(pattern)?)
+    pub fn analyse(pattern: &LowerPattern, kind: FactorKind) -> Result<Self> {
+        Self::analyse_with_order(pattern, &amd_order(pattern)?, kind)
     }
 
     /// Symbolic analysis with a given elimination order: `order[k]` is the unknown eliminated
     /// k-th. Saddle-point systems need one that eliminates each pressure after the displacements
     /// it couples to, so that no pivot is the (tiny) compliance alone.
-    pub fn analyse_with_order(pattern: &LowerPattern, order: &[usize]) -> Result<Self> {
+    pub fn analyse_with_order(
+        pattern: &LowerPattern,
+        order: &[usize],
+        kind: FactorKind,
+    ) -> Result<Self> {
         let n = pattern.n;
         let mut inverse = vec![usize::MAX; n];
         for (k, &i) in order.iter().enumerate() {
@@ -196,6 +211,7 @@ impl SparseFactor {
             SymbolicCholeskyRaw::Simplicial(_) => None,
         };
         let mut factor = SparseFactor {
+            kind,
             split,
             values: written_zeros(symbolic.len_val()),
             symbolic,
@@ -208,12 +224,14 @@ impl SparseFactor {
         };
         // The numeric factorisations' workspace, allocated and written now as well.
         let par = factor.parallelism();
-        let req = factor
-            .symbolic
-            .factorize_numeric_llt_scratch::<f64>(par, Default::default())
-            .or(factor
+        let req = match kind {
+            FactorKind::Llt => factor
                 .symbolic
-                .factorize_numeric_ldlt_scratch::<f64>(par, Default::default()));
+                .factorize_numeric_llt_scratch::<f64>(par, Default::default()),
+            FactorKind::Ldlt => factor
+                .symbolic
+                .factorize_numeric_ldlt_scratch::<f64>(par, Default::default()),
+        };
         scratch_of(&mut factor.scratch, req)?.fill(std::mem::MaybeUninit::new(0));
         Ok(factor)
     }
@@ -248,8 +266,22 @@ impl SparseFactor {
         self.values.len()
     }
 
+    pub fn kind(&self) -> FactorKind {
+        self.kind
+    }
+
+    /// Numeric factorisation of the [`FactorKind`] chosen at analysis, of `values` in the
+    /// analysed `pattern`. `Ok(false)` when the matrix has no such factorisation: not
+    /// numerically positive definite (`L L^T`), a zero or non-finite pivot (`L D L^T`).
+    pub fn factor(&mut self, pattern: &LowerPattern, values: &[f64]) -> Result<bool> {
+        match self.kind {
+            FactorKind::Llt => self.factor_llt(pattern, values),
+            FactorKind::Ldlt => self.factor_ldlt(pattern, values),
+        }
+    }
+
     /// Numeric `L L^T`. Returns `Ok(false)` when the matrix is not numerically positive definite.
-    pub fn factor_llt(&mut self, pattern: &LowerPattern, values: &[f64]) -> Result<bool> {
+    fn factor_llt(&mut self, pattern: &LowerPattern, values: &[f64]) -> Result<bool> {
         debug_assert_eq!(pattern.nnz(), self.slot.len(), "the analysed pattern");
         self.permute_values(values);
         let par = self.parallelism();
@@ -285,7 +317,7 @@ impl SparseFactor {
     /// semi-definite), which have such a factorisation in any order. Returns `Ok(false)` on a zero
     /// or non-finite pivot; the caller checks the resulting direction (an indefinite A still
     /// factors, so inertia is the caller's concern).
-    pub fn factor_ldlt(&mut self, pattern: &LowerPattern, values: &[f64]) -> Result<bool> {
+    fn factor_ldlt(&mut self, pattern: &LowerPattern, values: &[f64]) -> Result<bool> {
         debug_assert_eq!(pattern.nnz(), self.slot.len(), "the analysed pattern");
         self.permute_values(values);
         let par = self.parallelism();
@@ -702,27 +734,27 @@ mod tests {
     #[test]
     fn llt_solves_and_detects_indefinite() {
         let (p, v) = grid_laplacian([50, 1, 1], 0.0);
-        let mut f = SparseFactor::analyse(&p).unwrap();
-        assert!(f.factor_llt(&p, &v).unwrap());
+        let mut f = SparseFactor::analyse(&p, FactorKind::Llt).unwrap();
+        assert!(f.factor(&p, &v).unwrap());
         let x: Vec<f64> = (0..50).map(|i| (i as f64).sin()).collect();
         let mut b = p.symmetric_matvec(&v, &x);
         f.solve_in_place(&mut b);
         let err = max_difference(&b, &x);
         assert!(err < 1e-10, "{err}");
         let (_, v_indef) = grid_laplacian([50, 1, 1], -3.0);
-        assert!(!f.factor_llt(&p, &v_indef).unwrap());
+        assert!(!f.factor(&p, &v_indef).unwrap());
     }
 
     #[test]
     fn split_supernodal_solves_match_the_matrix() {
         // 14^3 unknowns: a supernodal factor whose solves are split between two threads.
         let (p, v) = grid_laplacian([14, 14, 14], 0.1);
-        let mut f = SparseFactor::analyse(&p).unwrap();
+        let mut f = SparseFactor::analyse(&p, FactorKind::Llt).unwrap();
         let split = f.split.as_ref().expect("a supernodal factor");
         assert!(!split.groups[1].is_empty(), "the solves are split");
         let x: Vec<f64> = (0..p.n).map(|i| (0.37 * i as f64).sin()).collect();
         let b = p.symmetric_matvec(&v, &x);
-        assert!(f.factor_llt(&p, &v).unwrap());
+        assert!(f.factor(&p, &v).unwrap());
         let mut solved = b.clone();
         f.solve_in_place(&mut solved);
         let err = max_difference(&solved, &x);
@@ -738,8 +770,8 @@ mod tests {
             row_idx: vec![0, 1, 1],
         };
         let v = vec![2.0, 1.0, -1e-8];
-        let mut f = SparseFactor::analyse(&p).unwrap();
-        assert!(f.factor_ldlt(&p, &v).unwrap());
+        let mut f = SparseFactor::analyse(&p, FactorKind::Ldlt).unwrap();
+        assert!(f.factor(&p, &v).unwrap());
         let x = [0.3, -0.7];
         let mut b = p.symmetric_matvec(&v, &x);
         f.solve_in_place(&mut b);

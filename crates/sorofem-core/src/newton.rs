@@ -6,54 +6,11 @@
 //! Hessians. The line search never accepts a state with an inverted element (infinite energy).
 
 use crate::error::{Error, Result};
+use crate::report::{SolveReport, Timings};
 use std::time::Instant;
 
-/// Seconds spent per phase of a solve.
-#[derive(Clone, Debug, Default)]
-pub struct Timings {
-    pub assembly: f64,
-    /// All numeric factorisations, the failed ones included.
-    pub factorization: f64,
-    /// The part of `factorization` spent in factorisations that failed (matrix not positive
-    /// definite): `(factorization - failed_factorization) / (factorizations -
-    /// failed_factorizations)` is the cost of one bare numeric factorisation.
-    pub failed_factorization: f64,
-    pub solve: f64,
-    pub line_search: f64,
-    pub total: f64,
-    /// Numeric factorisations, and how many of them failed or gave no descent direction.
-    pub factorizations: usize,
-    pub failed_factorizations: usize,
-}
-
-/// What happened during a solve: enough to judge convergence and where the time went.
-#[derive(Clone, Debug, Default)]
-pub struct SolveReport {
-    pub converged: bool,
-    /// Newton iterations over all load steps (including those of failed, cut-back steps).
-    pub iterations: usize,
-    /// `||g|| / reference` at every iterate, over all load steps (the first entry of each step
-    /// is its starting point).
-    pub residual_history: Vec<f64>,
-    /// Merit energy (J) at the same iterates.
-    pub energy_history: Vec<f64>,
-    /// Accepted line-search step length of every Newton iteration (1 = full Newton step).
-    pub step_lengths: Vec<f64>,
-    /// Accepted load steps.
-    pub load_steps: usize,
-    /// Times a load step failed and was halved.
-    pub cutbacks: usize,
-    /// Iterations that used the projected (PSD) Hessian.
-    pub projected_steps: usize,
-    /// Final `||g||` in the units of the gradient (N) and the reference it was divided by.
-    pub residual_norm: f64,
-    pub reference_norm: f64,
-    pub timings: Timings,
-    pub message: String,
-}
-
 /// Newton settings.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct NewtonOptions {
     /// Stop when `||g|| <= tolerance * reference` (relative residual).
     pub tolerance: f64,
@@ -66,10 +23,38 @@ pub struct NewtonOptions {
     /// Standard formulation: Hessians take their volumetric stiffness at element pressure
     /// iterates (Newton's method on the element-wise perturbed-Lagrangian form of the same
     /// energy; see [`crate::energy::ElasticTerm::advance_pressures`]) rather than at
-    /// `lambda c(J)`. Same solution, quadratic convergence, and far fewer iterations when the
-    /// body rotates: the 0.4 m cantilever at 8x2x2 cells takes 10 instead of 13, the 1 m one
-    /// at 48x8x8 cells 12 instead of 18. `false`: the exact Hessian of the energy.
+    /// `kappa c(J)`. Same solution, quadratic convergence, and fewer iterations when the body
+    /// rotates (docs/theory.md, "Newton's method", has the counts). `false`: the exact Hessian
+    /// of the energy.
     pub pressure_iterates: bool,
+}
+
+impl NewtonOptions {
+    /// Checks every setting; the error names the first bad one.
+    pub fn validate(&self) -> Result<()> {
+        if !(self.tolerance > 0.0 && self.tolerance.is_finite()) {
+            return Err(Error::invalid(
+                "tolerance",
+                "a finite relative residual > 0",
+                self.tolerance,
+            ));
+        }
+        if self.max_iterations == 0 {
+            return Err(Error::invalid(
+                "max_iterations",
+                "at least 1 Newton iteration per load step",
+                self.max_iterations,
+            ));
+        }
+        if self.load_steps == 0 {
+            return Err(Error::invalid(
+                "load_steps",
+                "at least 1 load step",
+                self.load_steps,
+            ));
+        }
+        Ok(())
+    }
 }
 
 impl Default for NewtonOptions {
@@ -84,18 +69,58 @@ impl Default for NewtonOptions {
     }
 }
 
+/// What the line search measures progress by.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Merit {
+    /// The energy whose Hessian the directions come from: its slope along `d` is `g . d`, and
+    /// the Hessian's quadratic model predicts its decrease (which decides when a projected phase
+    /// may return to the exact Hessian).
+    Energy,
+    /// Half the squared residual `|g|^2 / 2` (saddle-point problems, whose energy has no
+    /// minimum). Its slope along an exact Newton step is `-|g|^2`. A trial is also accepted when
+    /// its merit is at most `nonmonotone_factor` times the largest merit of the last five
+    /// iterates and at most its square times the merit at the start of the load step: the
+    /// Armijo test on a residual stalls far from the solution.
+    Residual { nonmonotone_factor: f64 },
+}
+
+impl Merit {
+    /// Derivative of the merit along `d` at `t = 0`, given the gradient `g` there.
+    pub fn slope(&self, g: &[f64], d: &[f64]) -> f64 {
+        match self {
+            Merit::Energy => dot(g, d),
+            // d is an exact Newton step of the residual g, so d/dt (|g|^2 / 2) = -|g|^2.
+            Merit::Residual { .. } => -dot(g, g),
+        }
+    }
+
+    fn nonmonotone_factor(&self) -> f64 {
+        match self {
+            Merit::Energy => 0.0,
+            Merit::Residual { nonmonotone_factor } => *nonmonotone_factor,
+        }
+    }
+}
+
 /// A minimisation problem in the free DOFs, at a given load factor.
 pub trait NewtonProblem {
-    fn n_free(&self) -> usize;
+    /// How the line search judges a step.
+    fn merit(&self) -> Merit;
     /// Sets the load factor (0: unloaded, 1: full loads) and applies it to the fixed DOFs of `z`.
     fn set_load_factor(&mut self, factor: f64, z: &mut [f64]);
     /// Norm of the external load on the free DOFs at the current factor (N): the residual scale.
     fn load_norm(&self) -> f64;
-    /// The merit energy (J), `+inf` when the state is inadmissible, and the gradient of the
-    /// energy with respect to the free DOFs (the residual Newton drives to zero). Evaluated
-    /// together because every accepted line-search trial needs both, and one pass over the
-    /// elements costs little more than the energy alone.
+    /// The merit (`+inf` when the state is inadmissible) and the gradient of the energy with
+    /// respect to the free DOFs (the residual Newton drives to zero). Evaluated together
+    /// because every accepted line-search trial needs both, and one pass over the elements
+    /// costs little more than the energy alone.
     fn merit_and_gradient(&mut self, z: &mut [f64]) -> (f64, Vec<f64>);
+    /// [`NewtonProblem::merit_and_gradient`] that also assembles the exact Hessian at `z` and
+    /// keeps it for the next [`NewtonProblem::direction`] (which must then be at this `z`): one
+    /// pass over the elements instead of two when the full step is expected to be accepted.
+    fn merit_gradient_and_hessian(&mut self, z: &mut [f64]) -> (f64, Vec<f64>) {
+        self.merit_and_gradient(z)
+    }
     /// Newton direction in the free DOFs: solves `H d = -g` with the exact (`projected = false`)
     /// or the projected Hessian. `Ok(None)` when that Hessian gives no descent direction.
     fn direction(
@@ -105,41 +130,26 @@ pub trait NewtonProblem {
         projected: bool,
         timings: &mut Timings,
     ) -> Result<Option<Vec<f64>>>;
-    /// Derivative of the merit along `d` at `t = 0`, given the gradient `g` there.
-    fn slope(&self, g: &[f64], d: &[f64]) -> f64 {
-        dot(g, d)
-    }
-    /// Whether the merit is the energy the Hessian is the second derivative of (so that a
-    /// quadratic model predicts its decrease), rather than a residual norm.
-    fn merit_is_energy(&self) -> bool {
-        true
-    }
-    /// A step is also accepted when its merit is at most this factor times the largest merit of
-    /// the last five iterates and at most its square times the merit at the start of the load
-    /// step (0: no such test). Used with residual merits (non-negative), whose Armijo test
-    /// stalls far from the solution.
-    fn nonmonotone_factor(&self) -> f64 {
-        0.0
-    }
-    /// [`NewtonProblem::merit_and_gradient`] that also assembles the exact Hessian at `z` and
-    /// keeps it for the next [`NewtonProblem::direction`] (which must then be at this `z`): one
-    /// pass over the elements instead of two when the full step is expected to be accepted.
-    fn merit_gradient_and_hessian(&mut self, z: &mut [f64]) -> (f64, Vec<f64>) {
-        self.merit_and_gradient(z)
-    }
-    /// Problems that carry iterates of their own besides `z` (the element pressures of
-    /// [`NewtonOptions::pressure_iterates`]) set them at the start `z` of each load step, move
-    /// them to the trial `z + t d` (before it is evaluated, for the Hessian kept with it, and
-    /// again once a step is accepted) and keep the trial's as the next iterate's.
-    fn start_iterates(&mut self, _z: &[f64]) {}
-    fn trial_iterates(&mut self, _z: &[f64], _d: &[f64], _t: f64) {}
-    fn commit_iterates(&mut self) {}
     /// Adds `t d` (free DOFs) to `z`.
     fn step(&self, z: &mut [f64], d: &[f64], t: f64);
     /// The largest step length `t <= 1` the line search tries first along `d` (1: no bound).
     fn step_bound(&self, _d: &[f64]) -> f64 {
         1.0
     }
+    /// The iterates the problem carries besides `z`, if any.
+    fn auxiliary(&mut self) -> Option<&mut dyn AuxiliaryIterates> {
+        None
+    }
+}
+
+/// Iterates a problem carries besides `z` (the element pressures of
+/// [`NewtonOptions::pressure_iterates`]): set at the start `z` of each load step, moved to the
+/// trial `z + t d` (before it is evaluated, for the Hessian kept with it, and again once a step
+/// is accepted), and the trial's kept as the next iterate's.
+pub trait AuxiliaryIterates {
+    fn start(&mut self, z: &[f64]);
+    fn trial(&mut self, z: &[f64], d: &[f64], t: f64);
+    fn commit(&mut self);
 }
 
 fn norm(v: &[f64]) -> f64 {
@@ -158,16 +168,7 @@ pub fn solve(
 ) -> Result<SolveReport> {
     let start = Instant::now();
     let mut report = SolveReport::default();
-    if !(options.tolerance > 0.0) || options.max_iterations == 0 || options.load_steps == 0 {
-        return Err(Error::invalid(
-            "options",
-            "tolerance > 0, max_iterations >= 1 and load_steps >= 1",
-            format!(
-                "tolerance {}, max_iterations {}, load_steps {}",
-                options.tolerance, options.max_iterations, options.load_steps
-            ),
-        ));
-    }
+    options.validate()?;
     let mut reached = 0.0;
     let mut increment = 1.0 / options.load_steps as f64;
     while reached < 1.0 {
@@ -220,7 +221,9 @@ fn newton_step(
 ) -> Result<bool> {
     // Element-wise work, like an assembly: timed as one.
     let t0 = Instant::now();
-    problem.start_iterates(z);
+    if let Some(auxiliary) = problem.auxiliary() {
+        auxiliary.start(z);
+    }
     let (mut energy, mut g) = problem.merit_and_gradient(z);
     report.timings.assembly += t0.elapsed().as_secs_f64();
     if !energy.is_finite() {
@@ -239,10 +242,9 @@ fn newton_step(
     let start_merit = energy;
     // Whether the next iteration tries the exact Hessian first. Once the exact Hessian has been
     // indefinite, the iterations stay with the projected one until a full step matches its
-    // quadratic model (energy merits only: a residual merit's decrease is not that model's); trying the exact one at every iterate of a large-rotation phase costs
-    // an assembly and a failed factorisation each time for the same steps (with the exact
-    // Hessian of the energy, without pressure iterates, the 1 m cantilever at 48x8x8 cells
-    // failed 11 of 19).
+    // quadratic model (energy merits only: a residual merit's decrease is not that model's):
+    // trying the exact one at every iterate of a large-rotation phase costs an assembly and a
+    // failed factorisation each time for the same steps.
     let mut exact_next = true;
     // Whether the full-step trial also assembles the Hessian there (see below).
     let mut prepare_next = false;
@@ -270,27 +272,25 @@ fn newton_step(
         };
         let t0 = Instant::now();
         let mut assembly_in_search = 0.0;
-        let slope = problem.slope(&g, &d);
+        let merit = problem.merit();
+        let slope = merit.slope(&g, &d);
         // The largest merit of the last five iterates (and of this one), for the non-monotone
         // Armijo test of Grippo, Lampariello and Lucidi (1986): a trial must fall below it by the
-        // Armijo decrease, not below the current merit. Large-rotation problems need this: with
-        // the plain Armijo test the hammerbot takes 17 Newton iterations instead of 14, the
-        // 0.4 m cantilever at 32x8x8 cells 16 instead of 12, the 1 m one at 8x2x2 16 instead of 14.
+        // Armijo decrease, not below the current merit, because the plain Armijo test cuts the
+        // long rotating steps of large-rotation problems.
         let window_max = report
             .energy_history
             .iter()
             .rev()
             .take(5)
             .fold(energy, |m, &e| m.max(e));
-        // Try the full Newton step first (unless bounded, below). Starting from twice the last accepted step
-        // saves rejected trials (cheap energy evaluations) but costs Newton iterations (a
-        // factorisation each): 15 -> 14 on the hammerbot, 20 -> 16 and 24 -> 19 on the 1 m
-        // cantilevers at 16x4x4 and 48x8x8 cells.
+        // Try the full Newton step first (unless bounded, below): starting from twice the last
+        // accepted step saves rejected trials (cheap merit evaluations) but costs Newton
+        // iterations (a factorisation each).
         //
         // Steps the problem bounds (a node moved farther than the body is large) start at the
         // largest power of two within the bound: the halving would reject the longer ones one
-        // by one (seven trials in the first iteration of the 1 m cantilever at 48x8x8 cells,
-        // whose linear step moves its tip 24 m).
+        // by one.
         let bound = problem.step_bound(&d);
         let mut t: f64 = 1.0;
         while t > bound && t > 1e-12 {
@@ -304,7 +304,9 @@ fn newton_step(
             problem.step(&mut trial, &d, t);
             let (e_trial, g_trial) = if prepare && t == 1.0 {
                 let t1 = Instant::now();
-                problem.trial_iterates(z, &d, t);
+                if let Some(auxiliary) = problem.auxiliary() {
+                    auxiliary.trial(z, &d, t);
+                }
                 let evaluated = problem.merit_gradient_and_hessian(&mut trial);
                 assembly_in_search += t1.elapsed().as_secs_f64();
                 evaluated
@@ -312,11 +314,10 @@ fn newton_step(
                 problem.merit_and_gradient(&mut trial)
             };
             if e_trial.is_finite() {
-                let factor = problem.nonmonotone_factor();
+                let factor = merit.nonmonotone_factor();
                 // The factor test may not compound from window to window: never above factor^2
-                // times the load step's starting merit. Without that cap the mixed 1 m
-                // cantilever (20x2x2 Kuhn cells, 10 load steps) let its residual grow 1e5-fold in
-                // its first load step and needed 150 iterations and a cut-back instead of 59.
+                // times the load step's starting merit, or the residual can grow window after
+                // window (tests/regression_mixed_residual_growth.rs).
                 if e_trial <= window_max + 1e-4 * t * slope
                     || (factor > 0.0
                         && e_trial <= factor * window_max
@@ -345,13 +346,15 @@ fn newton_step(
         let predicted = -(t - 0.5 * t * t) * slope;
         let previous = *report.energy_history.last().expect("the start is recorded");
         exact_next = !projected
-            || !problem.merit_is_energy()
+            || merit != Merit::Energy
             || (t == 1.0 && previous - energy > 0.5 * predicted);
         let t0 = Instant::now();
-        if !(prepare && t == 1.0) {
-            problem.trial_iterates(z, &d, t);
+        if let Some(auxiliary) = problem.auxiliary() {
+            if !(prepare && t == 1.0) {
+                auxiliary.trial(z, &d, t);
+            }
+            auxiliary.commit();
         }
-        problem.commit_iterates();
         report.timings.assembly += t0.elapsed().as_secs_f64();
         z.copy_from_slice(&trial);
         report.step_lengths.push(t);
@@ -383,8 +386,8 @@ mod tests {
     }
 
     impl NewtonProblem for Hyperbola {
-        fn n_free(&self) -> usize {
-            1
+        fn merit(&self) -> Merit {
+            Merit::Energy
         }
         fn set_load_factor(&mut self, _factor: f64, _z: &mut [f64]) {}
         fn load_norm(&self) -> f64 {

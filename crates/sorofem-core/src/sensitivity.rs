@@ -3,69 +3,182 @@
 //! Forward mode: `dz/dtheta . delta = -H^{-1} (dr/dtheta . delta)`. Adjoint mode: for a scalar
 //! objective O(x), `dO/dtheta = -lambda^T dr/dtheta` with `H lambda = dO/dz`. H is the exact
 //! Hessian at the solution (the saddle-point matrix in the mixed formulation, so pressures are
-//! part of z and `dr/dlambda` acts on the pressure rows); one factorisation serves every
+//! part of z and `dr/dkappa` acts on the pressure rows); one factorisation serves every
 //! forward and adjoint solve until the model or its parameters change.
 //!
-//! Parameters: per-tet shear modulus `mu` and Lame `lambda` (Pa), per-tet density `rho`
-//! (kg/m^3), gravity (m/s^2), and per cable its actuation alpha and stiffness (N/m).
+//! `dr/dtheta` comes from the terms of the model's registry that have parameters
+//! ([`crate::energy::ParamTerm`]), element by element: nothing here is specific to a term.
+//! Parameters are named blocks: the material's parameters (per tet, Pa or as the model
+//! declares), `density` (per tet, kg/m^3), `gravity` (3, m/s^2), `cable_actuation` and
+//! `cable_stiffness` (per cable, 1 and N/m).
 
-use crate::energy::{HessianMode, Term};
+use crate::energy::{HessianMode, ParamTerm};
 use crate::error::{Error, Result};
-use crate::model::{Formulation, Model};
+use crate::model::Model;
+use rayon::prelude::*;
 
-/// A value per parameter: a gradient `dO/dtheta` or a direction `delta theta`.
+/// A value per parameter, in named blocks: a gradient `dO/dtheta` or a direction
+/// `delta theta`. [`Model::param_zeros`] gives a model's blocks.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ParamVector {
-    pub mu: Vec<f64>,
-    pub lambda: Vec<f64>,
-    pub density: Vec<f64>,
-    pub gravity: [f64; 3],
-    pub cable_actuation: Vec<f64>,
-    pub cable_stiffness: Vec<f64>,
+    pub blocks: Vec<(String, Vec<f64>)>,
 }
 
 impl ParamVector {
-    pub fn zeros(n_tets: usize, n_cables: usize) -> Self {
+    /// The block named `name`.
+    pub fn get(&self, name: &str) -> Option<&[f64]> {
+        self.blocks
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v.as_slice())
+    }
+
+    /// The block named `name`, to fill in.
+    pub fn get_mut(&mut self, name: &str) -> Option<&mut Vec<f64>> {
+        self.blocks
+            .iter_mut()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v)
+    }
+}
+
+/// Where each parameter block sits in one flat vector, and where each term's blocks are.
+struct ParamLayout {
+    /// Name, offset and length of every block, in order of first appearance.
+    blocks: Vec<(String, usize, usize)>,
+    /// Per term, the flat offset of each of its blocks.
+    term_offsets: Vec<Vec<usize>>,
+    len: usize,
+}
+
+impl ParamLayout {
+    /// Blocks of the same name in several terms are one parameter (and must agree in length).
+    fn new(terms: &[&dyn ParamTerm]) -> Self {
+        let mut layout = ParamLayout {
+            blocks: Vec::new(),
+            term_offsets: Vec::new(),
+            len: 0,
+        };
+        for term in terms {
+            let mut offsets = Vec::new();
+            for (name, len) in term.param_blocks() {
+                let offset = match layout.blocks.iter().find(|b| b.0 == name) {
+                    Some(&(_, offset, known)) => {
+                        assert_eq!(known, len, "parameter block {name:?} with two lengths");
+                        offset
+                    }
+                    None => {
+                        layout.blocks.push((name, layout.len, len));
+                        layout.len += len;
+                        layout.len - len
+                    }
+                };
+                offsets.push(offset);
+            }
+            layout.term_offsets.push(offsets);
+        }
+        layout
+    }
+
+    fn unflatten(&self, flat: &[f64]) -> ParamVector {
         ParamVector {
-            mu: vec![0.0; n_tets],
-            lambda: vec![0.0; n_tets],
-            density: vec![0.0; n_tets],
-            gravity: [0.0; 3],
-            cable_actuation: vec![0.0; n_cables],
-            cable_stiffness: vec![0.0; n_cables],
+            blocks: self
+                .blocks
+                .iter()
+                .map(|(name, offset, len)| (name.clone(), flat[*offset..offset + len].to_vec()))
+                .collect(),
+        }
+    }
+
+    /// The flat vector of `p`, whose blocks must be among this layout's (missing ones are zero).
+    fn flatten(&self, p: &ParamVector) -> Result<Vec<f64>> {
+        let mut flat = vec![0.0; self.len];
+        for (name, values) in &p.blocks {
+            let Some(&(_, offset, len)) = self.blocks.iter().find(|b| &b.0 == name) else {
+                let known: Vec<&str> = self.blocks.iter().map(|b| b.0.as_str()).collect();
+                return Err(Error::invalid(
+                    "direction",
+                    format!("parameter names among {known:?}"),
+                    format!("{name:?}"),
+                ));
+            };
+            if values.len() != len {
+                return Err(Error::shape(
+                    &format!("direction[{name:?}]"),
+                    format!("({len},)"),
+                    format!("({},)", values.len()),
+                ));
+            }
+            crate::error::check_finite(&format!("direction[{name:?}]"), values)?;
+            flat[offset..offset + len].copy_from_slice(values);
+        }
+        Ok(flat)
+    }
+}
+
+/// Terms with fewer elements run their loops on the calling thread: a parallel region costs
+/// more than the work (waking the pool's threads, tens of microseconds on a busy machine).
+const PARALLEL_FROM_ELEMENTS: usize = 2048;
+
+/// Runs `body(scratch, (e, out))` for every element `e` of `term`, `out` the e-th chunk of
+/// `outputs` (`chunk` values each): in parallel for large terms, each thread with its own
+/// [`ElementScratch`].
+fn for_each_element<T: Send>(
+    term: &dyn ParamTerm,
+    outputs: &mut [T],
+    chunk: usize,
+    body: impl Fn(&mut ElementScratch, (usize, &mut [T])) + Sync,
+) {
+    if term.n_elements() >= PARALLEL_FROM_ELEMENTS {
+        (outputs.par_chunks_mut(chunk).enumerate())
+            .for_each_init(|| ElementScratch::new(term), |s, item| body(s, item));
+    } else {
+        let mut scratch = ElementScratch::new(term);
+        for item in outputs.chunks_mut(chunk).enumerate() {
+            body(&mut scratch, item);
         }
     }
 }
 
+/// Per-thread buffers of one term's element loop.
+struct ElementScratch {
+    dofs: Vec<usize>,
+    local: Vec<f64>,
+    params: Vec<(usize, usize)>,
+    gradient: Vec<f64>,
+    /// The direction's value of each parameter (forward mode).
+    weights: Vec<f64>,
+}
+
+impl ElementScratch {
+    fn new(term: &dyn ParamTerm) -> Self {
+        let (s, k) = (term.stencil_size(), term.element_param_count());
+        ElementScratch {
+            dofs: vec![0; s],
+            local: vec![0.0; s],
+            params: vec![(0, 0); k],
+            gradient: vec![0.0; k * s],
+            weights: vec![0.0; k],
+        }
+    }
+
+    /// Element `e`'s DOFs, its local values of `z` and its parameters.
+    fn gather(&mut self, term: &dyn ParamTerm, e: usize, z: &[f64]) {
+        term.element_dofs(e, &mut self.dofs);
+        for (v, &d) in self.local.iter_mut().zip(&self.dofs) {
+            *v = z[d];
+        }
+        term.element_params(e, &mut self.params);
+    }
+}
+
 impl Model {
-    /// Seconds of each of `repeats` numeric factorisations of the exact Hessian at the last
-    /// static solution (the rest state before any solve), with nothing running beside them: the
-    /// bare cost a Newton iteration is measured against. A diagnostic for benchmarks.
-    pub fn time_factorization(&mut self, repeats: usize) -> Result<Vec<f64>> {
-        let z = match &self.last_state {
-            Some((z, _)) => z.clone(),
-            None => vec![0.0; self.assembler.n_full()],
-        };
-        let eval = self
-            .assembler
-            .evaluate(&self.terms(), &z, false, Some(HessianMode::Exact));
-        let pattern = self.assembler.pattern();
-        self.factor_at_solution = false;
-        // On a pool worker, as in a solve (faer's parallel factorisation of large factors
-        // pays for every task it starts from outside the pool).
-        let (factor, formulation) = (&mut self.factor, &self.formulation);
-        rayon::scope(|_| {
-            (0..repeats)
-                .map(|_| {
-                    let t0 = std::time::Instant::now();
-                    match formulation {
-                        Formulation::Standard => factor.factor_llt(pattern, &eval.hessian)?,
-                        Formulation::Mixed { .. } => factor.factor_ldlt(pattern, &eval.hessian)?,
-                    };
-                    Ok(t0.elapsed().as_secs_f64())
-                })
-                .collect()
-        })
+    /// The model's parameters, all zero: the material's parameters (per tet), `density` (per
+    /// tet), `gravity` (3), `cable_actuation` and `cable_stiffness` (per cable).
+    pub fn param_zeros(&self) -> ParamVector {
+        let loads = self.terms.loads(&Default::default());
+        let layout = ParamLayout::new(&self.terms.parameterised(&loads));
+        layout.unflatten(&vec![0.0; layout.len])
     }
 
     /// Factors the exact Hessian at the last static solution (once per solution).
@@ -80,17 +193,12 @@ impl Model {
         if self.factor_at_solution {
             return Ok(());
         }
-        let eval = self
-            .assembler
-            .evaluate(&self.terms(), z, false, Some(HessianMode::Exact));
-        let ok = match self.formulation {
-            Formulation::Standard => self
-                .factor
-                .factor_llt(self.assembler.pattern(), &eval.hessian)?,
-            Formulation::Mixed { .. } => self
-                .factor
-                .factor_ldlt(self.assembler.pattern(), &eval.hessian)?,
-        };
+        let eval =
+            self.assembler
+                .evaluate(&self.terms.internal(), z, false, Some(HessianMode::Exact));
+        let ok = self
+            .factor
+            .factor(self.assembler.pattern(), &eval.hessian)?;
         if !ok {
             return Err(Error::LinearSolver {
                 message: "the Hessian at the solution is singular or indefinite (an unstable equilibrium?): \
@@ -102,121 +210,78 @@ impl Model {
         Ok(())
     }
 
-    /// Contracts `dr/dtheta` with a full-DOF vector `w` (zeros on fixed DOFs): returns
-    /// `w . dr/dtheta` for every parameter.
+    /// `w . dr/dtheta` for every parameter, from a full-DOF vector `w` (zeros on fixed DOFs).
+    /// The element kernels run in parallel (large terms); their values are summed in element
+    /// order.
     fn contract_param_derivatives(&self, w: &[f64]) -> ParamVector {
         let (z, loads) = self.last_state.as_ref().expect("prepared");
-        let m = self.mesh.n_tets();
-        let mut out = ParamVector::zeros(m, self.n_cables());
-        let s = self.elastic.stencil_size();
-        let (mut dofs, mut local, mut local_w) = (vec![0; s], vec![0.0; s], vec![0.0; s]);
-        let (mut d_mu, mut d_lambda) = (vec![0.0; s], vec![0.0; s]);
-        for e in 0..m {
-            self.elastic.element_dofs(e, &mut dofs);
-            for a in 0..s {
-                local[a] = z[dofs[a]];
-                local_w[a] = w[dofs[a]];
-            }
-            self.elastic
-                .element_param_derivatives(e, &local, &mut d_mu, &mut d_lambda);
-            out.mu[e] = d_mu.iter().zip(&local_w).map(|(a, b)| a * b).sum();
-            out.lambda[e] = d_lambda.iter().zip(&local_w).map(|(a, b)| a * b).sum();
-            // r = grad Pi - f with f_a = rho V / 4 g on each node a of the tet.
-            let quarter = self.mesh.volumes()[e] / 4.0;
-            for &node in &self.mesh.tets()[e] {
-                for k in 0..3 {
-                    out.density[e] -= quarter * loads.gravity[k] * w[3 * node + k];
-                    out.gravity[k] -= self.density[e] * quarter * w[3 * node + k];
-                }
-            }
-        }
-        let n = self.mesh.n_nodes();
-        for (i, &(_, mass)) in self.free_nodes.iter().enumerate() {
-            for k in 0..3 {
-                out.gravity[k] -= mass * w[3 * (n + i) + k];
-            }
-        }
-        let s = self.cables.stencil_size();
-        let (mut dofs, mut local, mut d_alpha, mut d_k) =
-            (vec![0; s], vec![0.0; s], vec![0.0; s], vec![0.0; s]);
-        for e in 0..self.cables.n_elements() {
-            self.cables.element_dofs(e, &mut dofs);
-            for a in 0..s {
-                local[a] = z[dofs[a]];
-            }
-            self.cables
-                .segment_param_derivatives(e, &local, &mut d_alpha, &mut d_k);
-            let c = self.cables.cable_of(e);
-            for a in 0..s {
-                out.cable_actuation[c] += d_alpha[a] * w[dofs[a]];
-                out.cable_stiffness[c] += d_k[a] * w[dofs[a]];
-            }
-        }
-        out
-    }
-
-    /// `dr/dtheta . delta` as a full-DOF vector.
-    fn param_derivative_along(&self, delta: &ParamVector) -> Vec<f64> {
-        let (z, loads) = self.last_state.as_ref().expect("prepared");
-        let mut out = vec![0.0; z.len()];
-        let m = self.mesh.n_tets();
-        let s = self.elastic.stencil_size();
-        let (mut dofs, mut local) = (vec![0; s], vec![0.0; s]);
-        let (mut d_mu, mut d_lambda) = (vec![0.0; s], vec![0.0; s]);
-        for e in 0..m {
-            let (dm, dl) = (
-                delta.mu.get(e).copied().unwrap_or(0.0),
-                delta.lambda.get(e).copied().unwrap_or(0.0),
-            );
-            if dm != 0.0 || dl != 0.0 {
-                self.elastic.element_dofs(e, &mut dofs);
-                for a in 0..s {
-                    local[a] = z[dofs[a]];
-                }
-                self.elastic
-                    .element_param_derivatives(e, &local, &mut d_mu, &mut d_lambda);
-                for a in 0..s {
-                    out[dofs[a]] += dm * d_mu[a] + dl * d_lambda[a];
-                }
-            }
-            let drho = delta.density.get(e).copied().unwrap_or(0.0);
-            let quarter = self.mesh.volumes()[e] / 4.0;
-            for &node in &self.mesh.tets()[e] {
-                for k in 0..3 {
-                    out[3 * node + k] -=
-                        quarter * (drho * loads.gravity[k] + self.density[e] * delta.gravity[k]);
-                }
-            }
-        }
-        let n = self.mesh.n_nodes();
-        for (i, &(_, mass)) in self.free_nodes.iter().enumerate() {
-            for k in 0..3 {
-                out[3 * (n + i) + k] -= mass * delta.gravity[k];
-            }
-        }
-        let s = self.cables.stencil_size();
-        let (mut dofs, mut local, mut d_alpha, mut d_k) =
-            (vec![0; s], vec![0.0; s], vec![0.0; s], vec![0.0; s]);
-        for e in 0..self.cables.n_elements() {
-            let c = self.cables.cable_of(e);
-            let (da, dk) = (
-                delta.cable_actuation.get(c).copied().unwrap_or(0.0),
-                delta.cable_stiffness.get(c).copied().unwrap_or(0.0),
-            );
-            if da == 0.0 && dk == 0.0 {
+        let load_terms = self.terms.loads(loads);
+        let terms = self.terms.parameterised(&load_terms);
+        let layout = ParamLayout::new(&terms);
+        let mut flat = vec![0.0; layout.len];
+        for (term, offsets) in terms.iter().zip(&layout.term_offsets) {
+            let (s, k) = (term.stencil_size(), term.element_param_count());
+            if k == 0 || term.n_elements() == 0 {
                 continue;
             }
-            self.cables.element_dofs(e, &mut dofs);
-            for a in 0..s {
-                local[a] = z[dofs[a]];
-            }
-            self.cables
-                .segment_param_derivatives(e, &local, &mut d_alpha, &mut d_k);
-            for a in 0..s {
-                out[dofs[a]] += da * d_alpha[a] + dk * d_k[a];
+            let mut contributions = vec![(0usize, 0.0f64); term.n_elements() * k];
+            for_each_element(*term, &mut contributions, k, |scratch, (e, out)| {
+                scratch.gather(*term, e, z);
+                term.element_param_gradient(e, &scratch.local, &mut scratch.gradient);
+                for (j, slot) in out.iter_mut().enumerate() {
+                    let (block, index) = scratch.params[j];
+                    let row = &scratch.gradient[j * s..(j + 1) * s];
+                    let value = row.iter().zip(&scratch.dofs).map(|(g, &d)| g * w[d]).sum();
+                    *slot = (offsets[block] + index, value);
+                }
+            });
+            for (index, value) in contributions {
+                flat[index] += value;
             }
         }
-        out
+        layout.unflatten(&flat)
+    }
+
+    /// `dr/dtheta . delta` as a full-DOF vector. Elements whose parameters `delta` leaves
+    /// unchanged are skipped.
+    fn param_derivative_along(&self, delta: &ParamVector) -> Result<Vec<f64>> {
+        let (z, loads) = self.last_state.as_ref().expect("prepared");
+        let load_terms = self.terms.loads(loads);
+        let terms = self.terms.parameterised(&load_terms);
+        let layout = ParamLayout::new(&terms);
+        let delta = layout.flatten(delta)?;
+        let mut out = vec![0.0; z.len()];
+        for (term, offsets) in terms.iter().zip(&layout.term_offsets) {
+            let (s, k) = (term.stencil_size(), term.element_param_count());
+            if k == 0 || term.n_elements() == 0 {
+                continue;
+            }
+            let mut local_out = vec![0.0; term.n_elements() * s];
+            for_each_element(*term, &mut local_out, s, |scratch, (e, out)| {
+                scratch.gather(*term, e, z);
+                for (weight, &(block, index)) in scratch.weights.iter_mut().zip(&scratch.params) {
+                    *weight = delta[offsets[block] + index];
+                }
+                out.fill(0.0);
+                if scratch.weights.iter().all(|&v| v == 0.0) {
+                    return;
+                }
+                term.element_param_gradient(e, &scratch.local, &mut scratch.gradient);
+                for (j, &weight) in scratch.weights.iter().enumerate() {
+                    for (o, g) in out.iter_mut().zip(&scratch.gradient[j * s..(j + 1) * s]) {
+                        *o += weight * g;
+                    }
+                }
+            });
+            let mut dofs = vec![0; s];
+            for (e, values) in local_out.chunks(s).enumerate() {
+                term.element_dofs(e, &mut dofs);
+                for (&d, v) in dofs.iter().zip(values) {
+                    out[d] += v;
+                }
+            }
+        }
+        Ok(out)
     }
 
     /// Adjoint gradient of a scalar objective of the equilibrium node positions:
@@ -245,18 +310,19 @@ impl Model {
             })
             .collect();
         self.factor.solve_in_place(&mut rhs);
-        let mut w = vec![0.0; self.assembler.n_full()];
+        let mut w = vec![0.0; self.layout.n_full()];
         for (&d, l) in self.assembler.full_of_free().iter().zip(&rhs) {
             w[d] = -l;
         }
         Ok(self.contract_param_derivatives(&w))
     }
 
-    /// Forward sensitivity along a parameter direction: `(dx, dp)` with dx the change of the
+    /// Forward sensitivity along a parameter direction (any of the blocks of
+    /// [`Model::param_zeros`]; missing blocks are zero): `(dx, dp)` with dx the change of the
     /// node positions (3 n, m per unit of the direction) and dp of the pressures (mixed only).
     pub fn forward(&mut self, direction: &ParamVector) -> Result<(Vec<f64>, Option<Vec<f64>>)> {
         self.prepare_sensitivities()?;
-        let b = self.param_derivative_along(direction);
+        let b = self.param_derivative_along(direction)?;
         let mut rhs: Vec<f64> = self
             .assembler
             .full_of_free()
@@ -264,14 +330,15 @@ impl Model {
             .map(|&d| -b[d])
             .collect();
         self.factor.solve_in_place(&mut rhs);
-        let mut dz = vec![0.0; self.assembler.n_full()];
+        let mut dz = vec![0.0; self.layout.n_full()];
         for (&d, v) in self.assembler.full_of_free().iter().zip(&rhs) {
             dz[d] = *v;
         }
-        let n = self.mesh.n_nodes();
-        let pressure = matches!(self.formulation, Formulation::Mixed { .. })
-            .then(|| dz[dz.len() - n..].to_vec());
-        dz.truncate(3 * n);
+        let pressure = self
+            .layout
+            .pressure_offset()
+            .map(|offset| dz[offset..].to_vec());
+        dz.truncate(3 * self.mesh.n_nodes());
         Ok((dz, pressure))
     }
 }

@@ -7,7 +7,7 @@ use common::{check_gradient, check_jacobian, check_jacobian_blocks, Rng};
 use sorofem_core::assembly::Assembler;
 use sorofem_core::energy::elastic::{PressureCompliance, PressureIterates};
 use sorofem_core::energy::{
-    ElasticTerm, Formulation, GravityTerm, HessianMode, PressureMass, Term,
+    ElasticTerm, Formulation, GravityTerm, HessianMode, LumpedMass, ParamTerm, PressureMass, Term,
 };
 use sorofem_core::material::Volumetric;
 use sorofem_core::mesh::TetMesh;
@@ -19,14 +19,9 @@ fn small_mesh() -> Arc<TetMesh> {
 
 fn elastic(mesh: &Arc<TetMesh>, volumetric: Volumetric, formulation: Formulation) -> ElasticTerm {
     let m = mesh.n_tets();
-    ElasticTerm {
-        mesh: mesh.clone(),
-        mu: (0..m).map(|e| 2e4 * (1.0 + 0.1 * e as f64)).collect(),
-        lambda: (0..m).map(|e| 3e5 * (1.0 + 0.05 * e as f64)).collect(),
-        volumetric,
-        formulation,
-        pressure_iterates: None,
-    }
+    let mu: Vec<f64> = (0..m).map(|e| 2e4 * (1.0 + 0.1 * e as f64)).collect();
+    let lambda: Vec<f64> = (0..m).map(|e| 3e5 * (1.0 + 0.05 * e as f64)).collect();
+    ElasticTerm::neo_hookean(mesh.clone(), &mu, &lambda, volumetric, formulation)
 }
 
 /// Checks one term's element gradients and Hessians at perturbed states. DOFs from `extra_from`
@@ -96,13 +91,17 @@ fn deformed_state(mesh: &TetMesh, n_extra: usize, seed: u64) -> Vec<f64> {
 fn standard_elastic_elements() {
     let mesh = small_mesh();
     for volumetric in [Volumetric::Log, Volumetric::Linear] {
-        let term = elastic(&mesh, volumetric, Formulation::Standard);
-        check_term_elements(
-            "standard",
-            &term,
-            &deformed_state(&mesh, 0, 1),
-            3 * mesh.n_nodes(),
-        );
+        let mut term = elastic(&mesh, volumetric, Formulation::Standard);
+        for closed_forms in [true, false] {
+            term.closed_forms = closed_forms;
+            let name = format!("standard (closed forms: {closed_forms})");
+            check_term_elements(
+                &name,
+                &term,
+                &deformed_state(&mesh, 0, 1),
+                3 * mesh.n_nodes(),
+            );
+        }
     }
 }
 
@@ -112,7 +111,7 @@ fn mixed_elastic_elements_with_pressure_coupling() {
     let n = mesh.n_nodes();
     for volumetric in [Volumetric::Log, Volumetric::Linear] {
         for mass in [PressureMass::Consistent, PressureMass::Lumped] {
-            let term = elastic(
+            let mut term = elastic(
                 &mesh,
                 volumetric,
                 Formulation::Mixed {
@@ -120,7 +119,11 @@ fn mixed_elastic_elements_with_pressure_coupling() {
                     mass,
                 },
             );
-            check_term_elements("mixed", &term, &deformed_state(&mesh, n, 2), 3 * n);
+            for closed_forms in [true, false] {
+                term.closed_forms = closed_forms;
+                let name = format!("mixed (closed forms: {closed_forms})");
+                check_term_elements(&name, &term, &deformed_state(&mesh, n, 2), 3 * n);
+            }
             let compliance = PressureCompliance {
                 elastic: &term,
                 mass,
@@ -130,12 +133,67 @@ fn mixed_elastic_elements_with_pressure_coupling() {
     }
 }
 
+/// `d(grad_e)/d(theta)` of every element against central differences of its gradient with the
+/// element's material parameters perturbed, both formulations (the mixed one's `lambda` acts on
+/// the pressure rows only).
+#[test]
+fn material_parameter_derivatives_of_element_gradients() {
+    let mesh = small_mesh();
+    let n = mesh.n_nodes();
+    for (formulation, extra) in [
+        (Formulation::Standard, 0),
+        (
+            Formulation::Mixed {
+                pressure_offset: 3 * n,
+                mass: PressureMass::Consistent,
+            },
+            n,
+        ),
+    ] {
+        let term = elastic(&mesh, Volumetric::Log, formulation);
+        let z_full = deformed_state(&mesh, extra, 5);
+        let (s, k) = (term.stencil_size(), term.element_param_count());
+        let mut dofs = vec![0; s];
+        for e in 0..term.n_elements() {
+            term.element_dofs(e, &mut dofs);
+            let z: Vec<f64> = dofs.iter().map(|&d| z_full[d]).collect();
+            let mut d_grad = vec![0.0; k * s];
+            term.element_param_gradient(e, &z, &mut d_grad);
+            // check_jacobian wants d grad_i / d theta_j at [i k + j].
+            let jacobian: Vec<f64> = (0..s * k).map(|ij| d_grad[(ij % k) * s + ij / k]).collect();
+            let theta = term.params()[e * k..(e + 1) * k].to_vec();
+            let gradient_at = |x: &[f64]| {
+                let mut params = term.params().to_vec();
+                params[e * k..(e + 1) * k].copy_from_slice(x);
+                let mut shifted = elastic(&mesh, Volumetric::Log, formulation);
+                shifted.set_material(term.material(), params);
+                let mut g = vec![0.0; s];
+                shifted.element(e, &z, Some(&mut g), None, HessianMode::Exact);
+                g
+            };
+            check_jacobian(
+                &format!("{formulation:?} element {e} parameter derivatives"),
+                &theta,
+                1e-6,
+                gradient_at,
+                &jacobian,
+                1e-6,
+                1e-12,
+            );
+        }
+    }
+}
+
 #[test]
 fn gravity_element_is_the_lumped_weight() {
     let mesh = small_mesh();
-    let term = GravityTerm {
+    let mass = LumpedMass {
         mesh: mesh.clone(),
         density: vec![1000.0; mesh.n_tets()],
+        points: vec![],
+    };
+    let term = GravityTerm {
+        mass: &mass,
         gravity: [0.0, -9.81, 1.0],
     };
     check_term_elements(

@@ -52,31 +52,26 @@ fn setup(formulation: Formulation) -> Setup {
 /// Objective O(x) = c . x with a fixed random c, evaluated at the equilibrium for parameters
 /// `base + e delta`.
 fn objective(setup: &mut Setup, c: &[f64], delta: &ParamVector, e: f64) -> f64 {
-    let m = setup.material.mu.len();
+    let shift = |base: &[f64], name: &str| -> Vec<f64> {
+        let d = delta.get(name).unwrap();
+        base.iter().zip(d).map(|(b, d)| b + e * d).collect()
+    };
     let shifted = Material {
-        mu: (0..m)
-            .map(|i| setup.material.mu[i] + e * delta.mu[i])
-            .collect(),
-        lambda: (0..m)
-            .map(|i| setup.material.lambda[i] + e * delta.lambda[i])
-            .collect(),
-        density: (0..m)
-            .map(|i| setup.material.density[i] + e * delta.density[i])
-            .collect(),
+        mu: shift(&setup.material.mu, "mu"),
+        lambda: shift(&setup.material.lambda, "lambda"),
+        density: shift(&setup.material.density, "density"),
     };
     setup.model.set_material(&shifted).unwrap();
     setup
         .model
-        .set_actuation(0, 0.9 + e * delta.cable_actuation[0])
+        .set_actuation(0, shift(&[0.9], "cable_actuation")[0])
         .unwrap();
     setup
         .model
-        .set_cable_stiffness(0, 2e3 + e * delta.cable_stiffness[0])
+        .set_cable_stiffness(0, shift(&[2e3], "cable_stiffness")[0])
         .unwrap();
     let mut loads = setup.loads.clone();
-    for k in 0..3 {
-        loads.gravity[k] += e * delta.gravity[k];
-    }
+    loads.gravity = std::array::from_fn(|k| shift(&setup.loads.gravity, "gravity")[k]);
     let options = SolveOptions {
         tolerance: 1e-12,
         ..Default::default()
@@ -85,63 +80,33 @@ fn objective(setup: &mut Setup, c: &[f64], delta: &ParamVector, e: f64) -> f64 {
     s.positions.iter().zip(c).map(|(x, ci)| x * ci).sum()
 }
 
-fn directions(m: usize, rng: &mut Rng) -> Vec<(&'static str, ParamVector)> {
-    let zero = ParamVector::zeros(m, 1);
+/// One direction per parameter block of `model`, random where per tet.
+fn directions(model: &Model, rng: &mut Rng) -> Vec<(&'static str, ParamVector)> {
+    let m = model.mesh().n_tets();
     let (mu, lambda) = lame_from_young(66e3, 0.45);
+    let zero = model.param_zeros();
+    let along = |name: &str, values: Vec<f64>| {
+        let mut delta = zero.clone();
+        *delta.get_mut(name).unwrap() = values;
+        delta
+    };
     vec![
-        (
-            "mu",
-            ParamVector {
-                mu: rng.vec(m, 0.1 * mu),
-                ..zero.clone()
-            },
-        ),
-        (
-            "lambda",
-            ParamVector {
-                lambda: rng.vec(m, 0.1 * lambda),
-                ..zero.clone()
-            },
-        ),
-        (
-            "density",
-            ParamVector {
-                density: rng.vec(m, 100.0),
-                ..zero.clone()
-            },
-        ),
-        (
-            "gravity",
-            ParamVector {
-                gravity: [0.3, -0.2, 0.5],
-                ..zero.clone()
-            },
-        ),
-        (
-            "cable actuation",
-            ParamVector {
-                cable_actuation: vec![0.05],
-                ..zero.clone()
-            },
-        ),
-        (
-            "cable stiffness",
-            ParamVector {
-                cable_stiffness: vec![200.0],
-                ..zero.clone()
-            },
-        ),
+        ("mu", along("mu", rng.vec(m, 0.1 * mu))),
+        ("lambda", along("lambda", rng.vec(m, 0.1 * lambda))),
+        ("density", along("density", rng.vec(m, 100.0))),
+        ("gravity", along("gravity", vec![0.3, -0.2, 0.5])),
+        ("cable actuation", along("cable_actuation", vec![0.05])),
+        ("cable stiffness", along("cable_stiffness", vec![200.0])),
     ]
 }
 
 fn dot(a: &ParamVector, b: &ParamVector) -> f64 {
-    let v = |x: &[f64], y: &[f64]| x.iter().zip(y).map(|(p, q)| p * q).sum::<f64>();
-    v(&a.mu, &b.mu)
-        + v(&a.lambda, &b.lambda)
-        + v(&a.density, &b.density)
-        + v(&a.gravity, &b.gravity)
-        + v(&a.cable_actuation, &b.cable_actuation)
-        + v(&a.cable_stiffness, &b.cable_stiffness)
+    let mut sum = 0.0;
+    for (name, x) in &a.blocks {
+        let y = b.get(name).unwrap();
+        sum += x.iter().zip(y).map(|(p, q)| p * q).sum::<f64>();
+    }
+    sum
 }
 
 #[test]
@@ -154,10 +119,9 @@ fn adjoint_and_forward_sensitivities_match_central_differences() {
     ] {
         let mut setup = setup(formulation);
         let n = setup.model.mesh().n_nodes();
-        let m = setup.model.mesh().n_tets();
         let mut rng = Rng::new(21);
         let c = rng.vec(3 * n, 1.0);
-        for (name, delta) in directions(m, &mut rng) {
+        for (name, delta) in directions(&setup.model, &mut rng) {
             // Analytic, at the base point.
             objective(&mut setup, &c, &delta, 0.0);
             let gradient = setup.model.adjoint(&c).unwrap();
@@ -191,7 +155,6 @@ fn adjoint_and_forward_sensitivities_match_central_differences() {
 fn sensitivities_refuse_a_solution_older_than_the_parameters() {
     let mut setup = setup(Formulation::Standard);
     let n = setup.model.mesh().n_nodes();
-    let m = setup.model.mesh().n_tets();
     let c = vec![1.0; 3 * n];
     let loads = setup.loads.clone();
     setup.model.set_material(&setup.material).unwrap();
@@ -214,5 +177,5 @@ fn sensitivities_refuse_a_solution_older_than_the_parameters() {
         .solve(&loads, None, &SolveOptions::default())
         .unwrap();
     setup.model.set_actuation(0, 0.8).unwrap();
-    assert!(setup.model.forward(&ParamVector::zeros(m, 1)).is_err());
+    assert!(setup.model.forward(&setup.model.param_zeros()).is_err());
 }

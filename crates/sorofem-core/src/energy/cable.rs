@@ -24,7 +24,7 @@
 //! `c / h [n n^T + (L - L_n) / L (I - n n^T)]` loses definiteness when the segment shortens; the
 //! projected Hessian clamps `L - L_n` at zero.
 
-use super::{HessianMode, Term};
+use super::{HessianMode, ParamTerm, Term};
 use nalgebra::{Matrix3, Vector3};
 
 /// Where a cable point is: `y = offset + sum_i weights[i] * u[dof_blocks[i]]` (3-vectors).
@@ -276,6 +276,30 @@ impl Term for CableTerm {
 }
 
 impl CableTerm {
+    /// The position (m) of every point of every cable at the full DOF vector `z`.
+    pub fn points_at(&self, z: &[f64]) -> Vec<Vec<[f64; 3]>> {
+        self.cables
+            .iter()
+            .map(|cable| {
+                (0..cable.points.len())
+                    .map(|k| cable.position(k, z).into())
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// The tension (N) of every segment of every cable at the full DOF vector `z`.
+    pub fn tensions_at(&self, z: &[f64]) -> Vec<Vec<f64>> {
+        self.cables
+            .iter()
+            .map(|cable| {
+                (0..cable.n_segments())
+                    .map(|k| cable.tension(k, z))
+                    .collect()
+            })
+            .collect()
+    }
+
     /// Cable index of element (segment) `e`.
     pub fn cable_of(&self, e: usize) -> usize {
         self.segments[e].0
@@ -317,5 +341,23 @@ impl CableTerm {
                 d_actuation[3 * slot + i] = coefficient * f[i];
             }
         }
+    }
+}
+
+impl ParamTerm for CableTerm {
+    fn param_blocks(&self) -> Vec<(String, usize)> {
+        let n = self.cables.len();
+        vec![("cable_actuation".into(), n), ("cable_stiffness".into(), n)]
+    }
+    fn element_param_count(&self) -> usize {
+        2
+    }
+    fn element_params(&self, e: usize, params: &mut [(usize, usize)]) {
+        let c = self.cable_of(e);
+        params.copy_from_slice(&[(0, c), (1, c)]);
+    }
+    fn element_param_gradient(&self, e: usize, z: &[f64], out: &mut [f64]) {
+        let (d_actuation, d_stiffness) = out.split_at_mut(self.stencil_size());
+        self.segment_param_derivatives(e, z, d_actuation, d_stiffness);
     }
 }

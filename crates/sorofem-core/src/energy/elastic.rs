@@ -1,25 +1,35 @@
-//! Neo-Hookean elasticity of linear tetrahedra, in the standard (displacement) and the mixed
-//! (displacement + pressure) formulation.
+//! Hyperelasticity of linear tetrahedra, in the standard (displacement) and the mixed
+//! (displacement + pressure) formulation, for any [`Hyperelastic`] model written as
+//! `W = W_rest + kappa/2 c(J)^2` (see [`crate::material::law`]).
 //!
-//! Standard: `E_e = V_e psi(F_e)` with `psi = mu/2 (I1 - 3) - mu ln J + lambda/2 c(J)^2`.
+//! Standard: `E_e = V_e W(F_e)`.
 //!
-//! Mixed: the volumetric energy `lambda/2 c^2` is replaced by its perturbed-Lagrangian form
-//! `p c(J) - p^2 / (2 lambda)`, with `p` interpolated from nodal pressures (P1, continuous):
-//! `E_e = V_e [psi_mu(F_e) + q_e c(J_e)] - 1/2 p_e^T C_e p_e`, `q_e` the mean of the element's four
-//! nodal pressures and `C_e = M_e / lambda_e` its pressure mass (consistent
+//! Mixed: the volumetric energy `kappa/2 c^2` is replaced by its perturbed-Lagrangian form
+//! `p c(J) - p^2 / (2 kappa)`, with `p` interpolated from nodal pressures (P1, continuous):
+//! `E_e = V_e [W_rest(F_e) + q_e c(J_e)] - 1/2 p_e^T C_e p_e`, `q_e` the mean of the element's
+//! four nodal pressures and `C_e = M_e / kappa_e` its pressure mass (consistent
 //! `V/20 (1 + delta_ab)` or lumped `V/4 delta_ab`, m^3). Summed over elements this is
-//! `W_mu(x) + p^T phi(x) - 1/2 p^T C p` with the nodal constraint `phi_i = sum_e V_e/4 c(J_e)`.
-//! Eliminating p (`C p = phi`) gives back `W_mu + 1/2 phi^T C^{-1} phi`, which tends to the standard
-//! energy as the mesh is refined, so both formulations solve the same continuum model.
+//! `W_rest(x) + p^T phi(x) - 1/2 p^T C p` with the nodal constraint `phi_i = sum_e V_e/4 c(J_e)`.
+//! Eliminating p (`C p = phi`) gives back `W_rest + 1/2 phi^T C^{-1} phi`, which tends to the
+//! standard energy as the mesh is refined, so both formulations solve the same continuum model.
+//!
+//! The Neo-Hookean model has closed forms that the element kernels use (its tangent is
+//! isotropic: [`super::set_isotropic_tet_hessian`] and the analytic projection); other models
+//! go through their 9x9 rest tangent ([`super::add_tet_hessian`], [`project_to_psd`]).
 
+pub use super::pressure_iterates::{LinearisedPressure, PressureIterates, PressureLinearisations};
 use super::{
-    add_tet_gradient, set_isotropic_tet_hessian, set_projected_isotropic_tet_hessian, HessianMode,
-    Term,
+    add_tet_gradient, add_tet_hessian, set_isotropic_tet_hessian,
+    set_projected_isotropic_tet_hessian, HessianMode, ParamTerm, Term,
 };
-use crate::material::{NeoHookean, Volumetric};
+use crate::material::neo_hookean::j_minus_one;
+use crate::material::{
+    inverse_transpose, project_to_psd, volumetric_tangent, ElementMaterial, Hyperelastic, Mat3,
+    MaterialModel, NeoHookean, Volumetric,
+};
 use crate::mesh::TetMesh;
+use nalgebra::Vector3;
 use rayon::prelude::*;
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 
 /// The pressure mass matrix `M_p` of the mixed formulation.
@@ -34,127 +44,108 @@ pub enum PressureMass {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Formulation {
     Standard,
-    /// Nodal pressure unknowns start at full DOF index `pressure_offset` (= 3 n_nodes).
+    /// Nodal pressure unknowns start at full DOF index `pressure_offset`, after the
+    /// displacements of the mesh nodes and of any free cable nodes
+    /// (see `model/layout.rs`).
     Mixed {
         pressure_offset: usize,
         mass: PressureMass,
     },
 }
 
-/// One tet's pressure `lambda c(J)` (Pa) at a state and its derivative with respect to the
-/// displacement gradient `H = F - I`: `dp/dH = lambda c'(J) J F^{-T}` (Pa, row-major), so that
-/// `dp = dp/dH : dH` with `dH = sum_a du_a g_a^T`.
-#[derive(Clone, Copy, Debug)]
-pub struct LinearisedPressure {
-    pub value: f64,
-    pub gradient: [f64; 9],
-}
-
-impl LinearisedPressure {
-    /// From the quantities an element kernel has at hand: `lambda` (Pa), `F^{-T}`, `J` and
-    /// `(c(J), c'(J))`. An inverted tet (`J <= 0`) gets a NaN value, which
-    /// [`ElasticTerm::advance_pressures`] leaves alone.
-    fn new(lambda: f64, gt: &crate::material::Mat3, j: f64, c: f64, dc: f64) -> Self {
-        if !(j > 0.0) {
-            return LinearisedPressure {
-                value: f64::NAN,
-                gradient: [0.0; 9],
-            };
-        }
-        let scale = lambda * dc * j;
-        LinearisedPressure {
-            value: lambda * c,
-            gradient: std::array::from_fn(|k| scale * gt[(k / 3, k % 3)]),
-        }
-    }
-}
-
-/// [`LinearisedPressure`]s of all tets at one state. The standard element kernel writes the
-/// entry of its tet whenever it builds a Hessian with pressure iterates (it has `F^{-T}`, `J` and
-/// `c(J)` at hand then), so a Newton step's pressure update needs no element pass of its own;
-/// the cells are atomic because the assembler's threads write them, each tet from one thread.
-pub struct PressureLinearisations {
-    cells: Vec<[AtomicU64; 10]>,
-}
-
-impl PressureLinearisations {
-    pub fn new(n_tets: usize) -> Self {
-        PressureLinearisations {
-            cells: (0..n_tets)
-                .map(|_| std::array::from_fn(|_| AtomicU64::new(0)))
-                .collect(),
-        }
-    }
-
-    pub fn len(&self) -> usize {
-        self.cells.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.cells.is_empty()
-    }
-
-    pub fn get(&self, e: usize) -> LinearisedPressure {
-        let cell = &self.cells[e];
-        let value = |k: usize| f64::from_bits(cell[k].load(Ordering::Relaxed));
-        LinearisedPressure {
-            value: value(0),
-            gradient: std::array::from_fn(|k| value(k + 1)),
-        }
-    }
-
-    fn set(&self, e: usize, linearised: &LinearisedPressure) {
-        let cell = &self.cells[e];
-        cell[0].store(linearised.value.to_bits(), Ordering::Relaxed);
-        for (slot, v) in cell[1..].iter().zip(&linearised.gradient) {
-            slot.store(v.to_bits(), Ordering::Relaxed);
-        }
-    }
-}
-
-/// The element pressures a Newton solve builds the standard formulation's Hessians with.
-pub struct PressureIterates {
-    /// `p_e` (Pa), one per tet.
-    pub values: Vec<f64>,
-    /// Written by every Hessian built with these iterates: the pressures linearised at the
-    /// state of the last one.
-    pub recorded: PressureLinearisations,
-}
-
-impl PressureIterates {
-    pub fn new(values: Vec<f64>) -> Self {
-        let recorded = PressureLinearisations::new(values.len());
-        PressureIterates { values, recorded }
-    }
-}
-
-/// Elastic energy of all tets. `mu` and `lambda` are per tet (Pa).
+/// Elastic energy of all tets: one [`MaterialModel`] with per-tet parameters.
 pub struct ElasticTerm {
     pub mesh: Arc<TetMesh>,
-    pub mu: Vec<f64>,
-    pub lambda: Vec<f64>,
-    pub volumetric: Volumetric,
+    material: MaterialModel,
+    /// Per-tet parameters, flat: tet e's are `params[e n_p..(e + 1) n_p]`, `n_p` the model's
+    /// parameter count, in the order of [`MaterialModel::param_names`].
+    params: Vec<f64>,
+    /// `kappa` (Pa) of each tet's primary volumetric term.
+    bulk: Vec<f64>,
     pub formulation: Formulation,
     /// Standard formulation: element pressures `p_e` (Pa, one per tet) at which the Hessian
-    /// takes its volumetric part, `lambda c'^2 dJ dJ + p_e (c'' dJ dJ + c' d2J)`, instead of at
-    /// `p_e = lambda c(J_e)`; energy and gradient are unchanged. Newton solves set them (see
+    /// takes its volumetric part, `kappa c'^2 dJ dJ + p_e (c'' dJ dJ + c' d2J)`, instead of at
+    /// `p_e = kappa c(J_e)`; energy and gradient are unchanged. Newton solves set them (see
     /// [`ElasticTerm::pressures_at`], [`ElasticTerm::advance_pressures`]); `None` gives the
     /// exact Hessian.
     pub pressure_iterates: Option<PressureIterates>,
+    /// Whether models with closed forms (Neo-Hookean) use them; `false` sends every model
+    /// through the general path (tests and benchmarks compare the two).
+    pub closed_forms: bool,
 }
 
 impl ElasticTerm {
-    pub fn material(&self, e: usize) -> NeoHookean {
-        NeoHookean {
-            mu: self.mu[e],
-            lambda: self.lambda[e],
-            volumetric: self.volumetric,
-        }
+    /// `params`: `n_tets x n_params` values, tet-major (validated by the caller, see
+    /// [`MaterialModel::try_at`]).
+    pub fn new(
+        mesh: Arc<TetMesh>,
+        material: MaterialModel,
+        params: Vec<f64>,
+        formulation: Formulation,
+    ) -> Self {
+        let mut term = ElasticTerm {
+            mesh,
+            material,
+            params: Vec::new(),
+            bulk: Vec::new(),
+            formulation,
+            pressure_iterates: None,
+            closed_forms: true,
+        };
+        term.set_material(material, params);
+        term
     }
 
-    /// Local pressure mass `C_e = M_e / lambda_e` entry (a, b).
+    /// A Neo-Hookean term with per-tet `mu` and `lambda` (Pa).
+    pub fn neo_hookean(
+        mesh: Arc<TetMesh>,
+        mu: &[f64],
+        lambda: &[f64],
+        volumetric: Volumetric,
+        formulation: Formulation,
+    ) -> Self {
+        let params = mu.iter().zip(lambda).flat_map(|(&m, &l)| [m, l]).collect();
+        Self::new(
+            mesh,
+            MaterialModel::NeoHookean { volumetric },
+            params,
+            formulation,
+        )
+    }
+
+    /// Replaces the model and its per-tet parameters (`n_tets x n_params`, tet-major).
+    pub fn set_material(&mut self, material: MaterialModel, params: Vec<f64>) {
+        assert_eq!(
+            params.len(),
+            self.mesh.n_tets() * material.n_params(),
+            "one parameter set per tet"
+        );
+        self.material = material;
+        self.params = params;
+        self.bulk = (0..self.mesh.n_tets())
+            .map(|e| self.element_material(e).bulk())
+            .collect();
+    }
+
+    pub fn material(&self) -> MaterialModel {
+        self.material
+    }
+
+    /// The per-tet parameters, `n_tets x n_params`, tet-major.
+    pub fn params(&self) -> &[f64] {
+        &self.params
+    }
+
+    /// The material of tet `e`.
+    #[inline]
+    pub fn element_material(&self, e: usize) -> ElementMaterial {
+        let n = self.material.n_params();
+        self.material.at(&self.params[e * n..(e + 1) * n])
+    }
+
+    /// Local pressure mass `C_e = M_e / kappa_e` entry (a, b).
     fn compliance(&self, e: usize, a: usize, b: usize, mass: PressureMass) -> f64 {
-        let v = self.mesh.volumes()[e] / self.lambda[e];
+        let v = self.mesh.volumes()[e] / self.bulk[e];
         match mass {
             PressureMass::Consistent => v / 20.0 * if a == b { 2.0 } else { 1.0 },
             PressureMass::Lumped => {
@@ -167,7 +158,18 @@ impl ElasticTerm {
         }
     }
 
-    /// The element pressures `lambda_e c(J_e)` (Pa, one per tet) of the energy itself at the
+    /// `C_e p` for the element's nodal pressures `p`.
+    fn compliance_times(&self, e: usize, p: &[f64], mass: PressureMass) -> [f64; 4] {
+        let mut cp = [0.0; 4];
+        for (a, cp_a) in cp.iter_mut().enumerate() {
+            for (b, p_b) in p.iter().enumerate() {
+                *cp_a += self.compliance(e, a, b, mass) * p_b;
+            }
+        }
+        cp
+    }
+
+    /// The element pressures `kappa_e c(J_e)` (Pa, one per tet) of the energy itself at the
     /// full DOF vector `z`: the pressure iterates a Newton solve starts from. Standard
     /// formulation; `+inf` for an inverted tet.
     pub fn pressures_at(&self, z: &[f64]) -> Vec<f64> {
@@ -176,7 +178,7 @@ impl ElasticTerm {
             .map(|e| {
                 let (_, j, c, _) = self.volume_state(e, z);
                 if j > 0.0 {
-                    self.lambda[e] * c
+                    self.bulk[e] * c
                 } else {
                     f64::INFINITY
                 }
@@ -184,26 +186,26 @@ impl ElasticTerm {
             .collect()
     }
 
-    /// Each tet's pressure `lambda c(J)` and its derivative at the full DOF vector `z`: what
+    /// Each tet's pressure `kappa c(J)` and its derivative at the full DOF vector `z`: what
     /// [`ElasticTerm::advance_pressures`] moves the pressure iterates with. Standard
     /// formulation. (Newton solves get these recorded by the Hessian pass instead.)
     pub fn linearised_pressures(&self, z: &[f64]) -> PressureLinearisations {
         let linearised = PressureLinearisations::new(self.mesh.n_tets());
         (0..self.mesh.n_tets()).into_par_iter().for_each(|e| {
             let (gt, j, c, dc) = self.volume_state(e, z);
-            linearised.set(e, &LinearisedPressure::new(self.lambda[e], &gt, j, c, dc));
+            linearised.set(e, &LinearisedPressure::new(self.bulk[e], &gt, j, c, dc));
         });
         linearised
     }
 
     /// Moves the pressure iterates the step `t dz` (full DOFs) from the state `linearised`
     /// describes, as Newton's method on the element-wise (P1-P0) perturbed-Lagrangian form of the
-    /// energy, `W_mu(u) + sum_e V_e [p_e c(J_e) - p_e^2 / (2 lambda_e)]`, moves its pressures: the
-    /// linearised constraint `p_e = lambda_e (c(J_e) + c'(J_e) dJ_e)`, `dJ_e = J_e F_e^{-T} : dH_e`,
-    /// gives the full step, of which `t` is taken. Eliminating `p_e` from that form gives back
-    /// the standard energy, so the solution is the same; the iterates differ from `lambda c(J)`
-    /// only while the linearised volume change is off, as when a rotation makes the
-    /// displacement update stretch elements spuriously.
+    /// energy, `W_rest(u) + sum_e V_e [p_e c(J_e) - p_e^2 / (2 kappa_e)]`, moves its pressures:
+    /// the linearised constraint `p_e = kappa_e (c(J_e) + c'(J_e) dJ_e)`,
+    /// `dJ_e = J_e F_e^{-T} : dH_e`, gives the full step, of which `t` is taken. Eliminating `p_e`
+    /// from that form gives back the standard energy, so the solution is the same; the iterates
+    /// differ from `kappa c(J)` only while the linearised volume change is off, as when a
+    /// rotation makes the displacement update stretch elements spuriously.
     pub fn advance_pressures(&mut self, linearised: &PressureLinearisations, dz: &[f64], t: f64) {
         let Some(mut iterates) = self.pressure_iterates.take() else {
             return;
@@ -228,21 +230,19 @@ impl ElasticTerm {
 
     /// `(F^{-T}, J, c(J), c'(J))` of tet `e` at the full DOF vector `z`; `J <= 0` (and the rest
     /// unspecified) for an inverted tet.
-    fn volume_state(&self, e: usize, z: &[f64]) -> (crate::material::Mat3, f64, f64, f64) {
+    fn volume_state(&self, e: usize, z: &[f64]) -> (Mat3, f64, f64, f64) {
         let h = self.displacement_gradient_of(e, z);
-        match crate::material::inverse_transpose(&(crate::material::Mat3::identity() + h)) {
+        match inverse_transpose(&(Mat3::identity() + h)) {
             Some((gt, j)) => {
-                let (c, dc, _) = self
-                    .volumetric
-                    .measure_near_one(crate::material::neo_hookean::j_minus_one(&h));
+                let (c, dc, _) = self.material.volumetric().measure_near_one(j_minus_one(&h));
                 (gt, j, c, dc)
             }
-            None => (crate::material::Mat3::zeros(), 0.0, 0.0, 0.0),
+            None => (Mat3::zeros(), 0.0, 0.0, 0.0),
         }
     }
 
     /// [`ElasticTerm::displacement_gradient`] of tet `e` from the full DOF vector `z`.
-    fn displacement_gradient_of(&self, e: usize, z: &[f64]) -> crate::material::Mat3 {
+    fn displacement_gradient_of(&self, e: usize, z: &[f64]) -> Mat3 {
         let tet = self.mesh.tets()[e];
         let mut u = [0.0; 12];
         for (a, &node) in tet.iter().enumerate() {
@@ -254,26 +254,40 @@ impl ElasticTerm {
     /// `H = F - I = sum_a u_a g_a^T` from the element's nodal displacements (m). Working with
     /// displacements and H rather than positions and F keeps the stress accurate to round-off
     /// relative to |H|, so small loads converge to tight relative tolerances.
-    fn displacement_gradient(&self, e: usize, u: &[f64]) -> crate::material::Mat3 {
+    fn displacement_gradient(&self, e: usize, u: &[f64]) -> Mat3 {
         let g = self.mesh.shape_gradients(e);
-        let mut f = crate::material::Mat3::zeros();
+        let mut f = Mat3::zeros();
         for a in 0..4 {
-            let ua = nalgebra::Vector3::new(u[3 * a], u[3 * a + 1], u[3 * a + 2]);
+            let ua = Vector3::new(u[3 * a], u[3 * a + 1], u[3 * a + 2]);
             f += ua * g[a].transpose();
         }
         f
     }
 
-    fn standard_element(
+    /// The pressure the standard Hessian takes its volumetric part at: the iterate when there
+    /// are iterates (recording the linearisation at this state for them), else `kappa c(J)`.
+    fn hessian_pressure(&self, e: usize, kappa: f64, gt: &Mat3, j: f64, c: f64, dc: f64) -> f64 {
+        match &self.pressure_iterates {
+            Some(iterates) => {
+                let linearised = LinearisedPressure::new(kappa, gt, j, c, dc);
+                iterates.recorded.set(e, &linearised);
+                iterates.values[e]
+            }
+            None => kappa * c,
+        }
+    }
+
+    /// Standard formulation, Neo-Hookean closed forms.
+    fn standard_neo_hookean(
         &self,
         e: usize,
+        material: &NeoHookean,
         z: &[f64],
         grad: Option<&mut [f64]>,
         hess: Option<&mut [f64]>,
         mode: HessianMode,
     ) -> f64 {
         let h = self.displacement_gradient(e, z);
-        let material = self.material(e);
         let Some(r) = material.pointwise(&h, true) else {
             return f64::INFINITY;
         };
@@ -286,14 +300,7 @@ impl ElasticTerm {
         if let Some(hess) = hess {
             let (gt, j) = (r.gt, r.j);
             let (c, dc, d2c) = r.measure;
-            let pressure = match &self.pressure_iterates {
-                Some(iterates) => {
-                    let linearised = LinearisedPressure::new(material.lambda, &gt, j, c, dc);
-                    iterates.recorded.set(e, &linearised);
-                    iterates.values[e]
-                }
-                None => material.lambda * c,
-            };
+            let pressure = self.hessian_pressure(e, material.lambda, &gt, j, c, dc);
             let dh = pressure * dc;
             let d2h = material.lambda * dc * dc + pressure * d2c;
             let (mu, alpha, beta) = (material.mu, material.mu - dh * j, d2h * j * j + dh * j);
@@ -302,7 +309,7 @@ impl ElasticTerm {
                     set_isotropic_tet_hessian(volume, g, &gt, mu, alpha, beta, &[], hess, 12)
                 }
                 HessianMode::Projected => {
-                    let f = crate::material::Mat3::identity() + h;
+                    let f = Mat3::identity() + h;
                     set_projected_isotropic_tet_hessian(
                         volume, g, &f, &gt, mu, alpha, beta, hess, 12,
                     )
@@ -312,9 +319,47 @@ impl ElasticTerm {
         volume * r.energy
     }
 
-    fn mixed_element(
+    /// Standard formulation, any model: the rest part through its 9x9 tangent, the volumetric
+    /// part `kappa/2 c(J)^2` through its isotropic form.
+    fn standard_general(
         &self,
         e: usize,
+        material: &impl Hyperelastic,
+        z: &[f64],
+        grad: Option<&mut [f64]>,
+        hess: Option<&mut [f64]>,
+        mode: HessianMode,
+    ) -> f64 {
+        let h = self.displacement_gradient(e, z);
+        let (Some(rest), Some((gt, j))) = (
+            material.rest(&h, hess.is_some()),
+            inverse_transpose(&(Mat3::identity() + h)),
+        ) else {
+            return f64::INFINITY;
+        };
+        let kappa = self.bulk[e];
+        let (c, dc, d2c) = material.volumetric().measure_near_one(j_minus_one(&h));
+        let volume = self.mesh.volumes()[e];
+        let g = self.mesh.shape_gradients(e);
+        if let Some(grad) = grad {
+            grad.fill(0.0);
+            add_tet_gradient(volume, g, &(rest.stress + (kappa * c * dc * j) * gt), grad);
+        }
+        if let (Some(hess), Some(tangent)) = (hess, rest.tangent) {
+            let pressure = self.hessian_pressure(e, kappa, &gt, j, c, dc);
+            let dh = pressure * dc;
+            let d2h = kappa * dc * dc + pressure * d2c;
+            set_general_tet_hessian(volume, g, &gt, j, dh, d2h, &tangent, mode, hess, 12);
+        }
+        volume * (rest.energy + 0.5 * kappa * c * c)
+    }
+
+    /// Mixed formulation, Neo-Hookean closed forms for the displacement block.
+    #[allow(clippy::too_many_arguments)]
+    fn mixed_neo_hookean(
+        &self,
+        e: usize,
+        material: &NeoHookean,
         z: &[f64],
         grad: Option<&mut [f64]>,
         hess: Option<&mut [f64]>,
@@ -322,7 +367,7 @@ impl ElasticTerm {
         mass: PressureMass,
     ) -> f64 {
         let h = self.displacement_gradient(e, z);
-        let Some(shear) = self.material(e).pointwise(&h, false) else {
+        let Some(shear) = material.pointwise(&h, false) else {
             return f64::INFINITY;
         };
         let (gt, j) = (shear.gt, shear.j);
@@ -331,12 +376,7 @@ impl ElasticTerm {
         let p = &z[12..16];
         let q = 0.25 * (p[0] + p[1] + p[2] + p[3]);
         let (c, dc, d2c) = shear.measure;
-        let mut cp = [0.0; 4];
-        for a in 0..4 {
-            for b in 0..4 {
-                cp[a] += self.compliance(e, a, b, mass) * p[b];
-            }
-        }
+        let cp = self.compliance_times(e, p, mass);
         let energy =
             volume * (shear.energy + q * c) - 0.5 * (0..4).map(|a| p[a] * cp[a]).sum::<f64>();
         // d(V c(J))/dx_b = V c'(J) J F^{-T} g_b, shared by the gradient and the coupling block.
@@ -350,14 +390,14 @@ impl ElasticTerm {
         }
         if let Some(hess) = hess {
             let (dh, d2h) = (q * dc, q * d2c);
-            let mu = self.mu[e];
+            let mu = material.mu;
             let (alpha, beta) = (mu - dh * j, d2h * j * j + dh * j);
             match mode {
                 // Only the displacement block is projected: the saddle point stays a saddle point.
                 HessianMode::Projected => set_projected_isotropic_tet_hessian(
                     volume,
                     g,
-                    &(crate::material::Mat3::identity() + h),
+                    &(Mat3::identity() + h),
                     &gt,
                     mu,
                     alpha,
@@ -369,22 +409,113 @@ impl ElasticTerm {
                     set_isotropic_tet_hessian(volume, g, &gt, mu, alpha, beta, &[], hess, 16)
                 }
             }
-            for b in 0..4 {
-                let coupling = dvol_stress * g[b] * (0.25 * volume);
-                for i in 0..3 {
-                    for a in 0..4 {
-                        hess[(3 * b + i) * 16 + 12 + a] = coupling[i];
-                        hess[(12 + a) * 16 + 3 * b + i] = coupling[i];
-                    }
-                }
-            }
+            self.set_pressure_blocks(e, volume, g, &dvol_stress, mass, hess);
+        }
+        energy
+    }
+
+    /// Mixed formulation, any model (see [`ElasticTerm::standard_general`]).
+    #[allow(clippy::too_many_arguments)]
+    fn mixed_general(
+        &self,
+        e: usize,
+        material: &impl Hyperelastic,
+        z: &[f64],
+        grad: Option<&mut [f64]>,
+        hess: Option<&mut [f64]>,
+        mode: HessianMode,
+        mass: PressureMass,
+    ) -> f64 {
+        let h = self.displacement_gradient(e, z);
+        let (Some(rest), Some((gt, j))) = (
+            material.rest(&h, hess.is_some()),
+            inverse_transpose(&(Mat3::identity() + h)),
+        ) else {
+            return f64::INFINITY;
+        };
+        let volume = self.mesh.volumes()[e];
+        let g = self.mesh.shape_gradients(e);
+        let p = &z[12..16];
+        let q = 0.25 * (p[0] + p[1] + p[2] + p[3]);
+        let (c, dc, d2c) = material.volumetric().measure_near_one(j_minus_one(&h));
+        let cp = self.compliance_times(e, p, mass);
+        let energy =
+            volume * (rest.energy + q * c) - 0.5 * (0..4).map(|a| p[a] * cp[a]).sum::<f64>();
+        let dvol_stress = dc * j * gt;
+        if let Some(grad) = grad {
+            grad.fill(0.0);
+            add_tet_gradient(volume, g, &(rest.stress + q * dvol_stress), grad);
             for a in 0..4 {
-                for b in 0..4 {
-                    hess[(12 + a) * 16 + 12 + b] = -self.compliance(e, a, b, mass);
+                grad[12 + a] = 0.25 * volume * c - cp[a];
+            }
+        }
+        if let (Some(hess), Some(tangent)) = (hess, rest.tangent) {
+            let (dh, d2h) = (q * dc, q * d2c);
+            set_general_tet_hessian(volume, g, &gt, j, dh, d2h, &tangent, mode, hess, 16);
+            self.set_pressure_blocks(e, volume, g, &dvol_stress, mass, hess);
+        }
+        energy
+    }
+
+    /// The mixed element Hessian's coupling blocks `d(grad_u)/dp` (and their transpose) and its
+    /// compliance block `-C_e`.
+    fn set_pressure_blocks(
+        &self,
+        e: usize,
+        volume: f64,
+        g: &[Vector3<f64>; 4],
+        dvol_stress: &Mat3,
+        mass: PressureMass,
+        hess: &mut [f64],
+    ) {
+        for b in 0..4 {
+            let coupling = dvol_stress * g[b] * (0.25 * volume);
+            for i in 0..3 {
+                for a in 0..4 {
+                    hess[(3 * b + i) * 16 + 12 + a] = coupling[i];
+                    hess[(12 + a) * 16 + 3 * b + i] = coupling[i];
                 }
             }
         }
-        energy
+        for a in 0..4 {
+            for b in 0..4 {
+                hess[(12 + a) * 16 + 12 + b] = -self.compliance(e, a, b, mass);
+            }
+        }
+    }
+}
+
+/// Writes the displacement block of a `stride`-wide element Hessian from a model's rest
+/// tangent `A_rest` (9x9) and a volumetric energy `h(J)` with `h' = dh`, `h'' = d2h`:
+/// `A = A_rest + (h'' J^2 + h' J) G (x) G - h' J G_il G_kj`. Exact: the volumetric part in its
+/// isotropic form, then the rest tangent added; projected: `A` projected to positive
+/// semi-definite as one 9x9 matrix.
+#[allow(clippy::too_many_arguments)]
+fn set_general_tet_hessian(
+    volume: f64,
+    g: &[Vector3<f64>; 4],
+    gt: &Mat3,
+    j: f64,
+    dh: f64,
+    d2h: f64,
+    rest_tangent: &crate::material::Tangent,
+    mode: HessianMode,
+    hess: &mut [f64],
+    stride: usize,
+) {
+    match mode {
+        HessianMode::Exact => {
+            let (alpha, beta) = (-dh * j, d2h * j * j + dh * j);
+            set_isotropic_tet_hessian(volume, g, gt, 0.0, alpha, beta, &[], hess, stride);
+            add_tet_hessian(volume, g, rest_tangent, hess, stride);
+        }
+        HessianMode::Projected => {
+            let tangent = project_to_psd(&(rest_tangent + volumetric_tangent(gt, j, dh, d2h)));
+            for row in 0..12 {
+                hess[row * stride..row * stride + 12].fill(0.0);
+            }
+            add_tet_hessian(volume, g, &tangent, hess, stride);
+        }
     }
 }
 
@@ -425,15 +556,26 @@ impl Term for ElasticTerm {
         hess: Option<&mut [f64]>,
         mode: HessianMode,
     ) -> f64 {
-        match self.formulation {
-            Formulation::Standard => self.standard_element(e, z, grad, hess, mode),
-            Formulation::Mixed { mass, .. } => self.mixed_element(e, z, grad, hess, mode, mass),
+        let material = self.element_material(e);
+        match (self.formulation, material) {
+            (Formulation::Standard, ElementMaterial::NeoHookean(m)) if self.closed_forms => {
+                self.standard_neo_hookean(e, &m, z, grad, hess, mode)
+            }
+            (Formulation::Mixed { mass, .. }, ElementMaterial::NeoHookean(m))
+                if self.closed_forms =>
+            {
+                self.mixed_neo_hookean(e, &m, z, grad, hess, mode, mass)
+            }
+            (Formulation::Standard, m) => self.standard_general(e, &m, z, grad, hess, mode),
+            (Formulation::Mixed { mass, .. }, m) => {
+                self.mixed_general(e, &m, z, grad, hess, mode, mass)
+            }
         }
     }
 }
 
-/// The pressure compliance `1/2 p^T C p` with `C = sum_e M_e / lambda_e`, on the nodal pressure
-/// DOFs alone (indices 0..n_nodes). Its Hessian is `C`, assembled once per material.
+/// The pressure compliance `1/2 p^T C p` with `C = sum_e M_e / kappa_e`, on the nodal pressure
+/// DOFs alone (indices 0..n_nodes). Its Hessian is `C`; its pattern is the node graph.
 pub struct PressureCompliance<'a> {
     pub elastic: &'a ElasticTerm,
     pub mass: PressureMass,
@@ -457,12 +599,7 @@ impl Term for PressureCompliance<'_> {
         hess: Option<&mut [f64]>,
         _: HessianMode,
     ) -> f64 {
-        let mut cp = [0.0; 4];
-        for a in 0..4 {
-            for b in 0..4 {
-                cp[a] += self.elastic.compliance(e, a, b, self.mass) * p[b];
-            }
-        }
+        let cp = self.elastic.compliance_times(e, p, self.mass);
         if let Some(grad) = grad {
             grad.copy_from_slice(&cp);
         }
@@ -477,42 +614,145 @@ impl Term for PressureCompliance<'_> {
     }
 }
 
-impl ElasticTerm {
-    /// Parameter derivatives of element `e`'s gradient at local DOFs `z`: writes
-    /// `d(grad_e)/d(mu_e)` and `d(grad_e)/d(lambda_e)` (each of length `stencil_size()`).
-    ///
-    /// Standard: `V (F - F^{-T}) g_a` and `V c c' J F^{-T} g_a`. Mixed: the shear part gives the
-    /// same mu-derivative on the displacement rows, while lambda only enters the compliance
-    /// `C_e = M_e / lambda`, so `d(grad_p)/d(lambda) = C_e p / lambda` and nothing on the
-    /// displacement rows (differentiating `lambda/2 c^2` there instead is the classic mistake).
-    pub fn element_param_derivatives(
-        &self,
-        e: usize,
-        z: &[f64],
-        d_mu: &mut [f64],
-        d_lambda: &mut [f64],
-    ) {
-        d_mu.fill(0.0);
-        d_lambda.fill(0.0);
+/// The material's parameters, one block per name with one value per tet.
+///
+/// Standard: `d(grad_a)/d(theta_k) = V (dP_rest/dtheta_k + dkappa/dtheta_k c c' J F^{-T}) g_a`.
+/// Mixed: the rest part gives the same displacement rows, while `kappa` only enters the
+/// compliance `C_e = M_e / kappa`, so `d(grad_p)/d(theta_k) = (C_e p / kappa) dkappa/dtheta_k`
+/// and nothing on the displacement rows (differentiating `kappa/2 c^2` there instead is the
+/// classic mistake).
+impl ParamTerm for ElasticTerm {
+    fn param_blocks(&self) -> Vec<(String, usize)> {
+        let m = self.mesh.n_tets();
+        (self.material.param_names().into_iter())
+            .map(|name| (name, m))
+            .collect()
+    }
+    fn element_param_count(&self) -> usize {
+        self.material.n_params()
+    }
+    fn element_params(&self, e: usize, params: &mut [(usize, usize)]) {
+        for (k, param) in params.iter_mut().enumerate() {
+            *param = (k, e);
+        }
+    }
+    fn element_param_gradient(&self, e: usize, z: &[f64], out: &mut [f64]) {
+        out.fill(0.0);
+        let material = self.element_material(e);
         let h = self.displacement_gradient(e, z);
-        let f = crate::material::Mat3::identity() + h;
-        let Some([dp_dmu, dp_dlambda]) = self.material(e).stress_param_gradient(&f) else {
+        let (Some(rest), Some((gt, j))) = (
+            material.rest_param_gradient(&h),
+            inverse_transpose(&(Mat3::identity() + h)),
+        ) else {
             return;
         };
+        let bulk = material.bulk_param_gradient();
+        let (c, dc, _) = material.volumetric().measure_near_one(j_minus_one(&h));
         let volume = self.mesh.volumes()[e];
         let g = self.mesh.shape_gradients(e);
-        add_tet_gradient(volume, g, &dp_dmu, &mut d_mu[..12]);
-        match self.formulation {
-            Formulation::Standard => add_tet_gradient(volume, g, &dp_dlambda, &mut d_lambda[..12]),
-            Formulation::Mixed { mass, .. } => {
-                let p = &z[12..16];
-                for a in 0..4 {
-                    d_lambda[12 + a] = (0..4)
-                        .map(|b| self.compliance(e, a, b, mass) * p[b])
-                        .sum::<f64>()
-                        / self.lambda[e];
+        let s = self.stencil_size();
+        for (k, row) in out.chunks_mut(s).enumerate() {
+            match self.formulation {
+                Formulation::Standard => {
+                    let stress = rest.stress[k] + (bulk[k] * c * dc * j) * gt;
+                    add_tet_gradient(volume, g, &stress, &mut row[..12]);
+                }
+                Formulation::Mixed { mass, .. } => {
+                    add_tet_gradient(volume, g, &rest.stress[k], &mut row[..12]);
+                    if bulk[k] != 0.0 {
+                        let cp = self.compliance_times(e, &z[12..16], mass);
+                        for a in 0..4 {
+                            row[12 + a] = cp[a] / self.bulk[e] * bulk[k];
+                        }
+                    }
                 }
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `max |x - y| <= tol max |x|`.
+    fn close(x: &[f64], y: &[f64], tol: f64) -> bool {
+        let scale = x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        x.iter().zip(y).all(|(p, q)| (p - q).abs() <= tol * scale)
+    }
+
+    /// The general path on a Neo-Hookean model against its closed forms: energy, gradient and
+    /// both Hessians of every tet of a small box at large random displacements (and pressures),
+    /// both formulations, both volumetric measures, with and without pressure iterates.
+    #[test]
+    fn general_path_matches_the_neo_hookean_closed_forms() {
+        let mesh = Arc::new(TetMesh::box_mesh([0.3, 0.1, 0.1], [3, 1, 1], [0.0; 3]).unwrap());
+        let m = mesh.n_tets();
+        let mu: Vec<f64> = (0..m).map(|e| 2e4 * (1.0 + 0.1 * e as f64)).collect();
+        let lambda: Vec<f64> = (0..m).map(|e| 3e5 * (1.0 + 0.05 * e as f64)).collect();
+        let (mut compared, mut projected) = (0, 0);
+        for formulation in [
+            Formulation::Standard,
+            Formulation::Mixed {
+                pressure_offset: 0,
+                mass: PressureMass::Consistent,
+            },
+        ] {
+            for volumetric in [Volumetric::Log, Volumetric::Linear] {
+                for iterates in [false, true] {
+                    let mut term = ElasticTerm::neo_hookean(
+                        mesh.clone(),
+                        &mu,
+                        &lambda,
+                        volumetric,
+                        formulation,
+                    );
+                    let s = term.stencil_size();
+                    if iterates && formulation == Formulation::Standard {
+                        let values = (0..m).map(|e| 1e3 * e as f64).collect();
+                        term.pressure_iterates = Some(PressureIterates::new(values));
+                    }
+                    for e in 0..m {
+                        // Displacements (m) large enough that some exact Hessians are
+                        // indefinite, then pressures (Pa).
+                        let z: Vec<f64> = (0..s)
+                            .map(|k| {
+                                let v = ((e * 31 + k * 17) % 23) as f64 / 11.0 - 1.0;
+                                if k >= 12 {
+                                    2e4 * v
+                                } else {
+                                    0.04 * v
+                                }
+                            })
+                            .collect();
+                        let mut exact = Vec::new();
+                        for mode in [HessianMode::Exact, HessianMode::Projected] {
+                            let mut results = Vec::new();
+                            for closed_forms in [true, false] {
+                                term.closed_forms = closed_forms;
+                                let (mut grad, mut hess) = (vec![0.0; s], vec![f64::NAN; s * s]);
+                                let energy =
+                                    term.element(e, &z, Some(&mut grad), Some(&mut hess), mode);
+                                results.push((energy, grad, hess));
+                            }
+                            let (a, b) = (&results[0], &results[1]);
+                            assert!(a.0.is_finite(), "tet {e} inverted");
+                            assert!((a.0 - b.0).abs() <= 1e-12 * a.0.abs(), "energy of tet {e}");
+                            assert!(close(&a.1, &b.1, 1e-12), "gradient of tet {e}");
+                            assert!(close(&a.2, &b.2, 1e-9), "{mode:?} Hessian of tet {e}");
+                            match mode {
+                                HessianMode::Exact => exact = a.2.clone(),
+                                HessianMode::Projected => {
+                                    projected += usize::from(!close(&exact, &a.2, 1e-9))
+                                }
+                            }
+                            compared += 1;
+                        }
+                    }
+                }
+            }
+        }
+        assert_eq!(compared, 2 * 2 * 2 * 2 * m);
+        assert!(projected >= 4, "too few indefinite cases: {projected}");
     }
 }

@@ -7,14 +7,13 @@
 pub mod cable;
 pub mod elastic;
 pub mod loads;
+pub mod pressure_iterates;
 
 pub use cable::{Cable, CableTerm, PointMap};
 pub use elastic::{ElasticTerm, Formulation, PressureMass};
-pub use loads::{GravityTerm, NodalForceTerm};
+pub use loads::{GravityTerm, LumpedMass, NodalForceTerm, PointGravityTerm};
 
-use crate::material::Mat3;
-#[cfg(test)]
-use crate::material::Tangent;
+use crate::material::{Mat3, Tangent};
 use nalgebra::Vector3;
 
 /// How an element Hessian is formed.
@@ -52,6 +51,27 @@ pub trait Term: Sync {
     }
 }
 
+/// A term whose gradient depends on parameters (material constants, density, gravity, cable
+/// actuation and stiffness): what sensitivities need of it, so that they need no code of their
+/// own per term.
+///
+/// The parameters form named blocks; blocks of the same name in several terms are one parameter
+/// (gravity acts on the tets and on the free cable nodes alike).
+pub trait ParamTerm: Term {
+    /// Name and length of each of the term's parameter blocks, e.g. `("gravity", 3)`.
+    fn param_blocks(&self) -> Vec<(String, usize)>;
+    /// Number of parameters the gradient of one element depends on.
+    fn element_param_count(&self) -> usize;
+    /// Writes the parameters element `e` depends on, each as `(block, index)`: the position of
+    /// its block in [`ParamTerm::param_blocks`] and its index within the block.
+    fn element_params(&self, e: usize, params: &mut [(usize, usize)]);
+    /// `d(grad_e)/d(theta_k)` at the element's local DOF values `z`, for each of its parameters
+    /// `theta_k` in the order of [`ParamTerm::element_params`]: writes every entry of
+    /// `out` (`element_param_count() x stencil_size()`, row-major; units of the gradient per
+    /// unit of the parameter).
+    fn element_param_gradient(&self, e: usize, z: &[f64], out: &mut [f64]);
+}
+
 /// Adds `V sum_j P_ij g_aj` to `grad[3a + i]`: the nodal forces of a stress P on a tet.
 pub(crate) fn add_tet_gradient(volume: f64, g: &[Vector3<f64>; 4], p: &Mat3, grad: &mut [f64]) {
     for a in 0..4 {
@@ -62,9 +82,9 @@ pub(crate) fn add_tet_gradient(volume: f64, g: &[Vector3<f64>; 4], p: &Mat3, gra
     }
 }
 
-/// Adds `V sum_jl A[3i+j, 3k+l] g_aj g_bl` to `hess[(3a+i) * stride + 3b+k]`: the general
-/// path, kept as the reference the isotropic shortcuts are tested against.
-#[cfg(test)]
+/// Adds `V sum_jl A[3i+j, 3k+l] g_aj g_bl` to `hess[(3a+i) * stride + 3b+k]`: the element
+/// Hessian of a 9x9 material tangent A (models without an isotropic closed form, and the
+/// reference the isotropic shortcuts are tested against).
 pub(crate) fn add_tet_hessian(
     volume: f64,
     g: &[Vector3<f64>; 4],

@@ -2,6 +2,10 @@
 //!
 //! Flattening convention for 3x3 tensors: entry (i, j) is component `3 i + j` of a 9-vector, so
 //! a fourth-order tangent dP/dF is a 9x9 matrix `A[3i+j, 3k+l] = dP_ij / dF_kl`.
+//!
+//! Every model is one file implementing [`Hyperelastic`]; [`MaterialModel`] (the models a body
+//! can be made of) and [`ElementMaterial`] (one element's model at its parameters) list them,
+//! one arm each.
 
 pub mod isochoric;
 pub mod law;
@@ -12,9 +16,140 @@ pub mod yeoh;
 
 pub use law::{Hyperelastic, RestParamGradient};
 pub use mooney_rivlin::MooneyRivlin;
-pub use neo_hookean::{NeoHookean, Volumetric};
+pub use neo_hookean::{NeoHookean, Response, Volumetric};
 pub use ogden::Ogden;
 pub use yeoh::Yeoh;
+
+use crate::error::{Error, Result};
+
+/// The hyperelastic models a body can be made of, with their model-wide options. Per-element
+/// parameters are stored apart, flat, in the order of [`MaterialModel::param_names`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MaterialModel {
+    /// Compressible Neo-Hookean ([`NeoHookean`]): `mu`, `lambda` (Pa).
+    NeoHookean { volumetric: Volumetric },
+}
+
+impl MaterialModel {
+    /// The model's name as the bindings spell it.
+    pub fn name(&self) -> &'static str {
+        match self {
+            MaterialModel::NeoHookean { .. } => "neo_hookean",
+        }
+    }
+
+    /// Parameter names, in storage order.
+    pub fn param_names(&self) -> Vec<String> {
+        match self {
+            MaterialModel::NeoHookean { .. } => NeoHookean::PARAM_NAMES.map(String::from).to_vec(),
+        }
+    }
+
+    /// The number of parameters per element (cheap: element kernels ask it).
+    #[inline]
+    pub fn n_params(&self) -> usize {
+        match self {
+            MaterialModel::NeoHookean { .. } => NeoHookean::PARAM_NAMES.len(),
+        }
+    }
+
+    /// The measure `c(J)` of the primary volumetric term (the same for every element).
+    pub fn volumetric(&self) -> Volumetric {
+        match self {
+            MaterialModel::NeoHookean { volumetric } => *volumetric,
+        }
+    }
+
+    /// One element's material from its parameters (`n_params()` values, already validated by
+    /// [`MaterialModel::try_at`]).
+    #[inline]
+    pub fn at(&self, params: &[f64]) -> ElementMaterial {
+        match *self {
+            MaterialModel::NeoHookean { volumetric } => ElementMaterial::NeoHookean(NeoHookean {
+                mu: params[0],
+                lambda: params[1],
+                volumetric,
+            }),
+        }
+    }
+
+    /// [`MaterialModel::at`] after the model's own checks, and for the mixed formulation (whose
+    /// pressure compliance is `M_p / kappa`) a positive finite `kappa`. Errors name the
+    /// parameter.
+    pub fn try_at(&self, params: &[f64], mixed: bool) -> Result<ElementMaterial> {
+        match *self {
+            MaterialModel::NeoHookean { volumetric } => {
+                let material = NeoHookean::try_new(params, volumetric)?;
+                if mixed && !(material.lambda > 0.0) {
+                    return Err(Error::invalid(
+                        "lambda",
+                        "Lame lambda > 0 Pa in the mixed formulation (0 < nu < 0.5; nu = 0.5 has no finite \
+                         lambda and leaves the P1-P1 pressure modes uncontrolled)",
+                        material.lambda,
+                    ));
+                }
+                Ok(ElementMaterial::NeoHookean(material))
+            }
+        }
+    }
+}
+
+/// One element's material: a model at its parameter values.
+#[derive(Clone, Copy, Debug)]
+pub enum ElementMaterial {
+    NeoHookean(NeoHookean),
+}
+
+impl Hyperelastic for ElementMaterial {
+    fn param_names(&self) -> Vec<String> {
+        match self {
+            ElementMaterial::NeoHookean(m) => m.param_names(),
+        }
+    }
+    #[inline]
+    fn rest(&self, h: &Mat3, with_tangent: bool) -> Option<Response> {
+        match self {
+            ElementMaterial::NeoHookean(m) => m.rest(h, with_tangent),
+        }
+    }
+    #[inline]
+    fn bulk(&self) -> f64 {
+        match self {
+            ElementMaterial::NeoHookean(m) => m.bulk(),
+        }
+    }
+    #[inline]
+    fn volumetric(&self) -> Volumetric {
+        match self {
+            ElementMaterial::NeoHookean(m) => Hyperelastic::volumetric(m),
+        }
+    }
+    fn rest_param_gradient(&self, h: &Mat3) -> Option<RestParamGradient> {
+        match self {
+            ElementMaterial::NeoHookean(m) => m.rest_param_gradient(h),
+        }
+    }
+    fn bulk_param_gradient(&self) -> Vec<f64> {
+        match self {
+            ElementMaterial::NeoHookean(m) => m.bulk_param_gradient(),
+        }
+    }
+}
+
+/// The small-strain shear modulus (Pa) of an isotropic model: `dP_01/dF_01` at rest, to which
+/// the volumetric term contributes nothing.
+pub fn shear_modulus(material: &impl Hyperelastic) -> f64 {
+    material
+        .rest(&Mat3::zeros(), true)
+        .and_then(|r| r.tangent)
+        .map_or(f64::NAN, |t| t[(1, 1)])
+}
+
+/// Cauchy stress `sigma = P F^T / J` (Pa) of the full density at F; `None` when `J <= 0`.
+pub fn cauchy_stress(material: &impl Hyperelastic, f: &Mat3) -> Option<Mat3> {
+    let r = material.response(&(f - Mat3::identity()), false)?;
+    Some(r.stress * f.transpose() / f.determinant())
+}
 
 use nalgebra::{Matrix3, SMatrix, SymmetricEigen};
 

@@ -3,9 +3,16 @@
 //! `psi(F) = mu/2 (I1 - 3) - mu ln J + lambda/2 c(J)^2` (J/m^3 = Pa), with `I1 = tr(F^T F)`,
 //! `J = det F` and `c(J) = ln J` ([`Volumetric::Log`], the paper's model) or `c(J) = J - 1`
 //! ([`Volumetric::Linear`]). The split into a shear part `psi_mu` and a volumetric part
-//! `lambda/2 c^2` is what the mixed formulation replaces by `p c(J) - p^2/(2 lambda)`.
+//! `lambda/2 c^2` is what the mixed formulation replaces by `p c(J) - p^2/(2 lambda)`: as a
+//! [`Hyperelastic`] model, `W_rest = psi_mu` and `kappa = lambda`.
+//!
+//! Its inherent `response`, `shear` and `energy_density` take F; the [`Hyperelastic`] methods
+//! take `H = F - I`.
 
-use super::{inverse_transpose, volumetric_tangent, Mat3, Tangent};
+use super::{
+    inverse_transpose, volumetric_tangent, Hyperelastic, Mat3, RestParamGradient, Tangent,
+};
+use crate::error::{Error, Result};
 
 /// The volumetric measure `c(J)` enforced by the volumetric energy (or the mixed constraint).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -68,6 +75,35 @@ pub struct Pointwise {
 }
 
 impl NeoHookean {
+    /// Parameter names, in the order of [`NeoHookean::try_new`]'s slice.
+    pub const PARAM_NAMES: [&'static str; 2] = ["mu", "lambda"];
+
+    /// From `[mu, lambda]` (Pa): `mu > 0`, `lambda >= 0` (nu = 0 is allowed), both finite.
+    pub fn try_new(params: &[f64], volumetric: Volumetric) -> Result<Self> {
+        let [mu, lambda] = params else {
+            return Err(Error::shape(
+                "params",
+                "2 values: mu, lambda",
+                format!("{} values", params.len()),
+            ));
+        };
+        if !(*mu > 0.0 && mu.is_finite()) {
+            return Err(Error::invalid("mu", "shear modulus > 0 Pa", mu));
+        }
+        if !(*lambda >= 0.0 && lambda.is_finite()) {
+            return Err(Error::invalid(
+                "lambda",
+                "Lame lambda >= 0 Pa (0 <= nu < 0.5)",
+                lambda,
+            ));
+        }
+        Ok(NeoHookean {
+            mu: *mu,
+            lambda: *lambda,
+            volumetric,
+        })
+    }
+
     /// Energy density and stress at `H = F - I` (with or without the volumetric part
     /// `lambda/2 c(J)^2`), plus the quantities the isotropic tangent is built from. The same
     /// values as [`NeoHookean::response_from_displacement_gradient`] and
@@ -192,6 +228,43 @@ impl NeoHookean {
         let (g, j) = inverse_transpose(f)?;
         let (c, dc, _) = self.volumetric.measure(j);
         Some([f - g, c * dc * j * g])
+    }
+}
+
+impl Hyperelastic for NeoHookean {
+    fn param_names(&self) -> Vec<String> {
+        Self::PARAM_NAMES.map(String::from).to_vec()
+    }
+
+    /// `psi_mu`, see [`NeoHookean::shear_from_displacement_gradient`].
+    fn rest(&self, h: &Mat3, with_tangent: bool) -> Option<Response> {
+        self.shear_from_displacement_gradient(h, with_tangent)
+    }
+
+    fn bulk(&self) -> f64 {
+        self.lambda
+    }
+
+    fn volumetric(&self) -> Volumetric {
+        self.volumetric
+    }
+
+    /// `psi_mu / mu = (tr H - (J - 1)) + |H|^2/2 + ((J - 1) - ln J)` and
+    /// `P_mu / mu = H + F^{-T} H^T` for mu; nothing for lambda (it is `kappa`).
+    fn rest_param_gradient(&self, h: &Mat3) -> Option<RestParamGradient> {
+        let (g, _) = inverse_transpose(&(Mat3::identity() + h))?;
+        let jm1 = j_minus_one(h);
+        Some(RestParamGradient {
+            energy: vec![
+                (h.trace() - jm1) + 0.5 * h.norm_squared() + (jm1 - jm1.ln_1p()),
+                0.0,
+            ],
+            stress: vec![h + g * h.transpose(), Mat3::zeros()],
+        })
+    }
+
+    fn bulk_param_gradient(&self) -> Vec<f64> {
+        vec![0.0, 1.0]
     }
 }
 

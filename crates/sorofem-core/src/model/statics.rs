@@ -1,0 +1,215 @@
+//! Static equilibria: loads in, positions, pressures, reactions and cable states out.
+
+use super::system::System;
+use super::Model;
+use crate::energy::HessianMode;
+use crate::error::{check_finite, Error, Result};
+use crate::material::{cauchy_stress, neo_hookean::von_mises};
+use crate::newton::{self, NewtonOptions};
+use crate::report::SolveReport;
+
+/// External loads of one solve. `prescribed` has one displacement (m) per fixed node, in the
+/// order the fixed nodes were given (empty: all zero); `nodal_forces` pairs node indices with
+/// forces (N); gravity in m/s^2.
+#[derive(Clone, Debug, Default)]
+pub struct Loads {
+    pub gravity: [f64; 3],
+    pub nodal_forces: Vec<(usize, [f64; 3])>,
+    pub prescribed: Vec<[f64; 3]>,
+}
+
+/// An equilibrium: positions (m, 3 n node-major), nodal pressures (Pa, mixed only), the
+/// reaction force (N) at each fixed node (in the order they were given), the position (m) of
+/// every cable point and the tension (N) of every cable segment, and the report.
+#[derive(Clone, Debug)]
+pub struct Solution {
+    pub positions: Vec<f64>,
+    pub pressure: Option<Vec<f64>>,
+    pub reactions: Vec<[f64; 3]>,
+    pub cable_points: Vec<Vec<[f64; 3]>>,
+    pub cable_tensions: Vec<Vec<f64>>,
+    pub report: SolveReport,
+}
+
+impl Model {
+    /// Static equilibrium under `loads`, starting from `initial` positions (3 n, m) or the rest shape.
+    /// Internally the unknowns are displacements from the rest shape. In the mixed formulation a
+    /// warm start (`initial` given) also starts from the pressures of the previous solve.
+    pub fn solve(
+        &mut self,
+        loads: &Loads,
+        initial: Option<&[f64]>,
+        options: &NewtonOptions,
+    ) -> Result<Solution> {
+        self.require_material("solve")?;
+        self.check_loads(loads)?;
+        let n = self.mesh.n_nodes();
+        let mut z = self.start_state("initial", initial)?;
+        let full_load = self.load_vector(loads);
+        let prescribed = self.prescribed(loads);
+        let mut problem = System::new(self, full_load, prescribed, None, options);
+        // Only the prescribed displacements are scaled by the load factor: the initial guess is
+        // kept as given for the free DOFs, which is what warm starts need.
+        // The Newton loop runs on a worker of the thread pool: from the calling thread, its
+        // single-threaded factorisations let the workers fall asleep and the element passes
+        // after them ran slower (docs/theory.md, "Newton's method").
+        let report = rayon::scope(|_| newton::solve(&mut problem, &mut z, options))?;
+        let full_load = std::mem::take(&mut problem.full_load);
+        drop(problem);
+        // Reaction = internal force minus applied load at the supports, so that the reactions
+        // balance the loads: sum(reactions) + sum(loads) = 0 at equilibrium.
+        let internal = self.assembler.full_gradient(&self.terms.internal(), &z);
+        let reactions = self
+            .fixed_nodes
+            .iter()
+            .map(|&i| std::array::from_fn(|k| internal[3 * i + k] - full_load[3 * i + k]))
+            .collect();
+        self.last_state = Some((z.clone(), loads.clone()));
+        self.factor_at_solution = false;
+        let pressure = self
+            .layout
+            .pressure_offset()
+            .map(|offset| z[offset..].to_vec());
+        self.last_extra = Some(z[self.layout.extra()].to_vec());
+        let cable_points = self.terms.cables.points_at(&z);
+        let cable_tensions = self.terms.cables.tensions_at(&z);
+        z.truncate(3 * n);
+        for (zi, ri) in z.iter_mut().zip(self.mesh.rest_flat()) {
+            *zi += ri;
+        }
+        Ok(Solution {
+            positions: z,
+            pressure,
+            reactions,
+            cable_points,
+            cable_tensions,
+            report,
+        })
+    }
+
+    /// Checks `loads` against the model: finite values, node indices in range, one prescribed
+    /// displacement per fixed node (or none).
+    pub(crate) fn check_loads(&self, loads: &Loads) -> Result<()> {
+        let n = self.mesh.n_nodes();
+        check_finite("gravity", &loads.gravity)?;
+        if loads.prescribed.len() != self.fixed_nodes.len() && !loads.prescribed.is_empty() {
+            return Err(Error::shape(
+                "prescribed",
+                format!(
+                    "({}, 3): one displacement per fixed node",
+                    self.fixed_nodes.len()
+                ),
+                format!("({}, 3)", loads.prescribed.len()),
+            ));
+        }
+        check_finite("prescribed", loads.prescribed.as_flattened())?;
+        for (position, &(node, force)) in loads.nodal_forces.iter().enumerate() {
+            if node >= n {
+                return Err(Error::IndexOutOfRange {
+                    param: "forces".into(),
+                    position,
+                    index: node as i64,
+                    len: n,
+                });
+            }
+            check_finite("forces", &force)?;
+        }
+        Ok(())
+    }
+
+    /// The prescribed displacement of every fixed node (zero when `loads` gives none).
+    pub(crate) fn prescribed(&self, loads: &Loads) -> Vec<[f64; 3]> {
+        if loads.prescribed.is_empty() {
+            vec![[0.0; 3]; self.fixed_nodes.len()]
+        } else {
+            loads.prescribed.clone()
+        }
+    }
+
+    /// The full DOF vector a solve starts from: the rest state, or the node positions `initial`
+    /// (3 n, m; the parameter is named `param` in errors) with the free cable nodes and
+    /// pressures of the last solve, when there was one.
+    pub(crate) fn start_state(&self, param: &str, initial: Option<&[f64]>) -> Result<Vec<f64>> {
+        let n = self.mesh.n_nodes();
+        let mut z = vec![0.0; self.layout.n_full()];
+        if let Some(x) = initial {
+            if x.len() != 3 * n {
+                return Err(Error::shape(
+                    param,
+                    format!("({n}, 3) positions"),
+                    format!("{} values", x.len()),
+                ));
+            }
+            check_finite(param, x)?;
+            for (zi, (xi, ri)) in z.iter_mut().zip(x.iter().zip(self.mesh.rest_flat())) {
+                *zi = xi - ri;
+            }
+            if let Some(extra) = &self.last_extra {
+                z[self.layout.extra()].copy_from_slice(extra);
+            }
+        }
+        Ok(z)
+    }
+
+    /// External load vector (N, full DOFs) of `loads`, free cable nodes' weight included.
+    pub(crate) fn load_vector(&self, loads: &Loads) -> Vec<f64> {
+        self.assembler.load_vector(&self.terms.loads(loads).list())
+    }
+
+    /// Per-tet volume ratio `J = det F` and von Mises Cauchy stress (Pa) at `positions` (3 n).
+    /// In the mixed formulation the stress uses the element's volumetric response
+    /// `kappa c(J) c'(J) J` of the same energy, so both formulations report comparable stresses.
+    pub fn element_fields(&self, positions: &[f64]) -> Result<(Vec<f64>, Vec<f64>)> {
+        let n = self.mesh.n_nodes();
+        if positions.len() != 3 * n {
+            return Err(Error::shape(
+                "positions",
+                format!("({n}, 3)"),
+                format!("{} values", positions.len()),
+            ));
+        }
+        let u: Vec<f64> = positions
+            .iter()
+            .zip(self.mesh.rest_flat())
+            .map(|(x, r)| x - r)
+            .collect();
+        let mut j = Vec::with_capacity(self.mesh.n_tets());
+        let mut vm = Vec::with_capacity(self.mesh.n_tets());
+        for e in 0..self.mesh.n_tets() {
+            let f = self.mesh.deformation_gradient(e, &u);
+            j.push(f.determinant());
+            vm.push(
+                cauchy_stress(&self.terms.elastic.element_material(e), &f)
+                    .map_or(f64::NAN, |s| von_mises(&s)),
+            );
+        }
+        Ok((j, vm))
+    }
+
+    /// Seconds of each of `repeats` numeric factorisations of the exact Hessian at the last
+    /// static solution (the rest state before any solve), with nothing running beside them: the
+    /// bare cost a Newton iteration is measured against. A diagnostic for benchmarks.
+    pub fn time_factorization(&mut self, repeats: usize) -> Result<Vec<f64>> {
+        let z = match &self.last_state {
+            Some((z, _)) => z.clone(),
+            None => vec![0.0; self.layout.n_full()],
+        };
+        let eval =
+            self.assembler
+                .evaluate(&self.terms.internal(), &z, false, Some(HessianMode::Exact));
+        let pattern = self.assembler.pattern();
+        self.factor_at_solution = false;
+        // On a pool worker, as in a solve (faer's parallel factorisation of large factors
+        // pays for every task it starts from outside the pool).
+        let factor = &mut self.factor;
+        rayon::scope(|_| {
+            (0..repeats)
+                .map(|_| {
+                    let t0 = std::time::Instant::now();
+                    factor.factor(pattern, &eval.hessian)?;
+                    Ok(t0.elapsed().as_secs_f64())
+                })
+                .collect()
+        })
+    }
+}

@@ -1,0 +1,410 @@
+//! The Newton view of a model: its registry's terms plus the loads at a load factor (and, for a
+//! time step, the inertia and damping), with the merit, directions and auxiliary iterates that
+//! [`crate::newton`] asks of it. Statics and dynamics both solve through it.
+
+use super::{Formulation, Model};
+use crate::energy::pressure_iterates::{PressureIterates, PressureLinearisations};
+use crate::energy::HessianMode;
+use crate::error::Result;
+use crate::linear::LowerPattern;
+use crate::newton::{AuxiliaryIterates, Merit, NewtonOptions, NewtonProblem};
+use crate::report::Timings;
+use std::time::Instant;
+
+/// The Newton view of a model at a load factor.
+pub(super) struct System<'a> {
+    pub(super) model: &'a mut Model,
+    /// External forces (N, full DOFs) at load factor 1, and at the current factor.
+    pub(super) full_load: Vec<f64>,
+    load: Vec<f64>,
+    load_free_norm: f64,
+    prescribed: Vec<[f64; 3]>,
+    /// Inertia and damping of an implicit Euler step, when the solve is one.
+    step: Option<StepTerms>,
+    /// [`NewtonOptions::pressure_iterates`] (standard formulation only).
+    pressure_iterates: bool,
+    /// The element pressures linearised at the current iterate, when `linearised_at_iterate`
+    /// (swapped in from those the Hessian pass there recorded).
+    linearised_pressures: PressureLinearisations,
+    linearised_at_iterate: bool,
+    /// The element pressure iterates of the current iterate (the model's elastic term holds
+    /// those of the state last moved to with `AuxiliaryIterates::trial`).
+    pressure_base: Vec<f64>,
+    /// The model's Hessian scratch holds the exact Hessian at the state last evaluated.
+    hessian_prepared: bool,
+}
+
+/// The pressure iterates belong to one solve: the model's Hessians are exact again afterwards
+/// (sensitivities, the next solve), whichever way the solve ended.
+impl Drop for System<'_> {
+    fn drop(&mut self) {
+        self.model.terms.elastic.pressure_iterates = None;
+    }
+}
+
+/// The quadratic terms implicit Euler adds to the energy (free DOFs `d`):
+/// `1/2 sum_d inertia_d (u_d - predicted_d)^2 + 1/2 (u - previous)^T D (u - previous)` with
+/// `inertia = m / h^2` and the Rayleigh damping `D = (alpha_M M + beta_K K_n) / h`, `K_n` the
+/// projected (positive semi-definite) displacement Hessian at the start of the step.
+pub(super) struct StepTerms {
+    pub(super) inertia: Vec<f64>,
+    pub(super) predicted: Vec<f64>,
+    pub(super) previous: Vec<f64>,
+    pub(super) mass_damping: Vec<f64>,
+    /// `beta_K / h K_n` in the Hessian's lower-triangle layout (empty without stiffness damping).
+    pub(super) stiffness_damping: Vec<f64>,
+    pub(super) diagonal: Vec<usize>,
+}
+
+impl StepTerms {
+    fn energy(&self, free: &[f64], pattern: &LowerPattern) -> f64 {
+        let mut e = 0.0;
+        for d in 0..free.len() {
+            let a = free[d] - self.predicted[d];
+            let b = free[d] - self.previous[d];
+            e += 0.5 * (self.inertia[d] * a * a + self.mass_damping[d] * b * b);
+        }
+        if !self.stiffness_damping.is_empty() {
+            let delta: Vec<f64> = free
+                .iter()
+                .zip(&self.previous)
+                .map(|(x, y)| x - y)
+                .collect();
+            let kd = pattern.symmetric_matvec(&self.stiffness_damping, &delta);
+            e += 0.5 * kd.iter().zip(&delta).map(|(a, b)| a * b).sum::<f64>();
+        }
+        e
+    }
+
+    fn add_gradient(&self, free: &[f64], pattern: &LowerPattern, g: &mut [f64]) {
+        for d in 0..free.len() {
+            g[d] += self.inertia[d] * (free[d] - self.predicted[d])
+                + self.mass_damping[d] * (free[d] - self.previous[d]);
+        }
+        if !self.stiffness_damping.is_empty() {
+            let delta: Vec<f64> = free
+                .iter()
+                .zip(&self.previous)
+                .map(|(x, y)| x - y)
+                .collect();
+            for (gi, kd) in g
+                .iter_mut()
+                .zip(pattern.symmetric_matvec(&self.stiffness_damping, &delta))
+            {
+                *gi += kd;
+            }
+        }
+    }
+
+    fn add_hessian(&self, hessian: &mut [f64]) {
+        for (d, &p) in self.diagonal.iter().enumerate() {
+            hessian[p] += self.inertia[d] + self.mass_damping[d];
+        }
+        for (h, k) in hessian.iter_mut().zip(&self.stiffness_damping) {
+            *h += k;
+        }
+    }
+}
+
+impl<'a> System<'a> {
+    pub(super) fn new(
+        model: &'a mut Model,
+        full_load: Vec<f64>,
+        prescribed: Vec<[f64; 3]>,
+        step: Option<StepTerms>,
+        options: &NewtonOptions,
+    ) -> Self {
+        let pressure_iterates =
+            options.pressure_iterates && model.formulation == Formulation::Standard;
+        System {
+            model,
+            full_load,
+            load: Vec::new(),
+            load_free_norm: 0.0,
+            prescribed,
+            step,
+            pressure_iterates,
+            linearised_pressures: PressureLinearisations::new(0),
+            linearised_at_iterate: false,
+            pressure_base: Vec::new(),
+            hessian_prepared: false,
+        }
+    }
+}
+
+impl System<'_> {
+    fn n_nodes(&self) -> usize {
+        self.model.mesh.n_nodes()
+    }
+
+    fn is_mixed(&self) -> bool {
+        matches!(self.model.formulation, Formulation::Mixed { .. })
+    }
+
+    /// Takes the pressure linearisation the last Hessian pass recorded as that of the current
+    /// iterate (the caller knows the pass was there).
+    fn take_recorded_linearisation(&mut self) {
+        if let Some(iterates) = &mut self.model.terms.elastic.pressure_iterates {
+            std::mem::swap(&mut self.linearised_pressures, &mut iterates.recorded);
+            self.linearised_at_iterate = true;
+        }
+    }
+
+    fn free_values(&self, z: &[f64]) -> Vec<f64> {
+        self.model
+            .assembler
+            .full_of_free()
+            .iter()
+            .map(|&d| z[d])
+            .collect()
+    }
+
+    /// The merit (see [`NewtonProblem::merit_and_gradient`]) from the terms' energy and
+    /// gradient at `z`.
+    fn merit_at(&self, z: &[f64], energy: f64, gradient: Vec<f64>) -> (f64, Vec<f64>) {
+        if !energy.is_finite() {
+            return (f64::INFINITY, vec![f64::INFINITY; gradient.len()]);
+        }
+        let mut g = gradient;
+        for (gi, &d) in g.iter_mut().zip(self.model.assembler.full_of_free()) {
+            *gi -= self.load[d];
+        }
+        let free_values = self.step.as_ref().map(|_| self.free_values(z));
+        if let (Some(step), Some(free)) = (&self.step, &free_values) {
+            step.add_gradient(free, self.model.assembler.pattern(), &mut g);
+        }
+        if self.is_mixed() {
+            let n = self.n_nodes();
+            let len = g.len();
+            g[len - n..]
+                .iter_mut()
+                .for_each(|v| *v *= self.model.pressure_weight);
+            if g.iter().any(|v| !v.is_finite()) {
+                return (f64::INFINITY, g);
+            }
+            return (0.5 * g.iter().map(|v| v * v).sum::<f64>(), g);
+        }
+        let external: f64 = self.load.iter().zip(z.iter()).map(|(f, x)| f * x).sum();
+        let mut energy = energy - external;
+        if let (Some(step), Some(free)) = (&self.step, &free_values) {
+            energy += step.energy(free, self.model.assembler.pattern());
+        }
+        (energy, g)
+    }
+}
+
+impl NewtonProblem for System<'_> {
+    /// Standard: the potential energy. Mixed: half the squared weighted residual of the
+    /// saddle-point system. The pressure is a Lagrange multiplier, so the mixed energy has no
+    /// minimum to descend to, and eliminating p through `C p = phi` would amplify the
+    /// second-order constraint error of every step by lambda (tiny steps as nu -> 0.5).
+    ///
+    /// The residual merit's non-monotone factor: half the squared residual may grow 100-fold
+    /// (the residual 10-fold) over the recent maximum, so that full Newton steps of the
+    /// saddle-point system are accepted far from the solution, where the Armijo test on the
+    /// residual would creep in 1/16 steps.
+    fn merit(&self) -> Merit {
+        if self.is_mixed() {
+            Merit::Residual {
+                nonmonotone_factor: 100.0,
+            }
+        } else {
+            Merit::Energy
+        }
+    }
+
+    fn set_load_factor(&mut self, factor: f64, z: &mut [f64]) {
+        self.load = self.full_load.iter().map(|f| f * factor).collect();
+        self.load_free_norm = self
+            .model
+            .assembler
+            .full_of_free()
+            .iter()
+            .map(|&d| self.load[d] * self.load[d])
+            .sum::<f64>()
+            .sqrt();
+        for (&node, u) in self.model.fixed_nodes.iter().zip(&self.prescribed) {
+            for k in 0..3 {
+                z[3 * node + k] = factor * u[k];
+            }
+        }
+    }
+
+    fn load_norm(&self) -> f64 {
+        self.load_free_norm
+    }
+
+    /// The merit (see [`NewtonProblem::merit`]) and the gradient of the energy minus the loads; in the
+    /// mixed formulation the volume-constraint rows (m^3) are multiplied by the pressure weight
+    /// so that they are forces too.
+    fn merit_and_gradient(&mut self, z: &mut [f64]) -> (f64, Vec<f64>) {
+        self.hessian_prepared = false;
+        let eval = self
+            .model
+            .assembler
+            .evaluate(&self.model.terms.internal(), z, true, None);
+        self.merit_at(z, eval.energy, eval.gradient)
+    }
+
+    fn merit_gradient_and_hessian(&mut self, z: &mut [f64]) -> (f64, Vec<f64>) {
+        let mut eval = std::mem::take(&mut self.model.hessian_scratch);
+        self.model.assembler.evaluate_into(
+            &self.model.terms.internal(),
+            z,
+            true,
+            Some(HessianMode::Exact),
+            &mut eval,
+        );
+        let (energy, gradient) = (eval.energy, std::mem::take(&mut eval.gradient));
+        self.model.hessian_scratch = eval;
+        self.hessian_prepared = energy.is_finite();
+        self.merit_at(z, energy, gradient)
+    }
+
+    fn direction(
+        &mut self,
+        z: &[f64],
+        g: &[f64],
+        projected: bool,
+        timings: &mut Timings,
+    ) -> Result<Option<Vec<f64>>> {
+        let mode = if projected {
+            HessianMode::Projected
+        } else {
+            HessianMode::Exact
+        };
+        let t0 = Instant::now();
+        let mut eval = std::mem::take(&mut self.model.hessian_scratch);
+        if !(self.hessian_prepared && mode == HessianMode::Exact) {
+            self.model.assembler.evaluate_into(
+                &self.model.terms.internal(),
+                z,
+                false,
+                Some(mode),
+                &mut eval,
+            );
+            self.take_recorded_linearisation();
+        }
+        self.hessian_prepared = false;
+        if let Some(step) = &self.step {
+            step.add_hessian(&mut eval.hessian);
+        }
+        timings.assembly += t0.elapsed().as_secs_f64();
+        let pattern = self.model.assembler.pattern();
+        let t0 = Instant::now();
+        let ok = self.model.factor.factor(pattern, &eval.hessian);
+        let seconds = t0.elapsed().as_secs_f64();
+        self.model.hessian_scratch = eval;
+        let ok = ok?;
+        timings.factorization += seconds;
+        timings.factorizations += 1;
+        if !ok {
+            timings.failed_factorization += seconds;
+            timings.failed_factorizations += 1;
+            return Ok(None);
+        }
+        let t0 = Instant::now();
+        let mut d: Vec<f64> = g.iter().map(|v| -v).collect();
+        if self.is_mixed() {
+            let n = self.n_nodes();
+            let len = d.len();
+            d[len - n..]
+                .iter_mut()
+                .for_each(|v| *v /= self.model.pressure_weight);
+        }
+        self.model.factor.solve_in_place(&mut d);
+        timings.solve += t0.elapsed().as_secs_f64();
+        // No inertia test for the mixed formulation: the condensed curvature
+        // du^T A du + dp^T C dp cancels catastrophically when the pressure (and so K_geo(p)) is
+        // large.
+        let usable = if self.is_mixed() {
+            d.iter().all(|v| v.is_finite())
+        } else {
+            d.iter().zip(g).map(|(a, b)| a * b).sum::<f64>() < 0.0
+        };
+        if !usable {
+            timings.failed_factorization += seconds;
+            timings.failed_factorizations += 1;
+        }
+        Ok(usable.then_some(d))
+    }
+
+    fn step(&self, z: &mut [f64], d: &[f64], t: f64) {
+        for (&full, di) in self.model.assembler.full_of_free().iter().zip(d) {
+            z[full] += t * di;
+        }
+    }
+
+    /// No mesh node may move farther than the rest mesh's bounding-box diagonal in one step.
+    fn step_bound(&self, d: &[f64]) -> f64 {
+        let n = self.n_nodes();
+        let mut squared = vec![0.0; n];
+        for (&full, di) in self.model.assembler.full_of_free().iter().zip(d) {
+            if full < 3 * n {
+                squared[full / 3] += di * di;
+            }
+        }
+        let longest = squared.iter().fold(0.0f64, |m, &v| m.max(v)).sqrt();
+        if longest > self.model.mesh.diameter() {
+            self.model.mesh.diameter() / longest
+        } else {
+            1.0
+        }
+    }
+
+    fn auxiliary(&mut self) -> Option<&mut dyn AuxiliaryIterates> {
+        if self.pressure_iterates {
+            Some(self)
+        } else {
+            None
+        }
+    }
+}
+
+/// The element pressure iterates of [`NewtonOptions::pressure_iterates`].
+impl AuxiliaryIterates for System<'_> {
+    fn start(&mut self, z: &[f64]) {
+        if self.pressure_iterates {
+            self.pressure_base = self.model.terms.elastic.pressures_at(z);
+            self.model.terms.elastic.pressure_iterates =
+                Some(PressureIterates::new(self.pressure_base.clone()));
+            // Swapped with the recorded ones: both sized for every tet.
+            if self.linearised_pressures.n_tets() != self.pressure_base.len() {
+                self.linearised_pressures = PressureLinearisations::new(self.pressure_base.len());
+            }
+            self.linearised_at_iterate = false;
+        }
+    }
+
+    fn trial(&mut self, z: &[f64], d: &[f64], t: f64) {
+        if self.pressure_iterates {
+            let mut dz = vec![0.0; z.len()];
+            for (&full, di) in self.model.assembler.full_of_free().iter().zip(d) {
+                dz[full] = *di;
+            }
+            if !self.linearised_at_iterate {
+                self.linearised_pressures = self.model.terms.elastic.linearised_pressures(z);
+                self.linearised_at_iterate = true;
+            }
+            if let Some(iterates) = &mut self.model.terms.elastic.pressure_iterates {
+                iterates.values.clone_from(&self.pressure_base);
+            }
+            self.model
+                .terms
+                .elastic
+                .advance_pressures(&self.linearised_pressures, &dz, t);
+        }
+    }
+
+    fn commit(&mut self) {
+        if let Some(iterates) = &self.model.terms.elastic.pressure_iterates {
+            self.pressure_base.clone_from(&iterates.values);
+            self.linearised_at_iterate = false;
+            // Accepted where the line search built the next Hessian: that pass recorded the
+            // linearisation at the new iterate.
+            if self.hessian_prepared {
+                self.take_recorded_linearisation();
+            }
+        }
+    }
+}
