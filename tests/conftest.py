@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from ci import missing_in_ci
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 
@@ -39,7 +40,7 @@ def shared_data() -> Path:
     """Path to the shared SolidFEM sample data (../shared/data/solidfem next to the repo)."""
     path = REPO_ROOT.parent / "shared" / "data" / "solidfem"
     if not path.is_dir():
-        pytest.skip(f"shared sample data not found at {path} (expected ../shared/data/solidfem beside the repo)")
+        missing_in_ci(f"shared sample data not found at {path} (expected ../shared/data/solidfem beside the repo)")
     return path
 
 

@@ -10,6 +10,7 @@ import pytest
 from fdcheck import check_gradient
 
 import sorofem as sf
+
 SIZE, CELLS = (0.4, 0.1, 0.1), (4, 2, 2)
 G = np.array([0.0, 0.0, -9.81])
 TIGHT = 1e-12  # Newton tolerance of the finite-difference solves
