@@ -368,7 +368,7 @@ def model(name: str) -> MaterialModel:
     ParameterError
         No such model.
     """
-    if name not in MODELS:
+    if not isinstance(name, str) or name not in MODELS:
         raise ParameterError(f"model: expected one of {list(MODELS)}, got {name!r}", "model")
     return MODELS[name]
 
@@ -392,6 +392,8 @@ def _material_value(value: Any, name: str) -> float | NDArray[np.float64]:
         raise ParameterError(
             f"{name}: expected a number or a per-element array of shape (n_tets,): {exc}", name
         ) from None
+    if arr.size == 0:
+        raise ParameterError(f"{name}: expected a number or a per-element array, got an empty array", name)
     if not np.all(np.isfinite(arr)):
         raise ParameterError(f"{name}: expected finite values, got {arr[~np.isfinite(arr)][0]}", name)
     arr.setflags(write=False)
@@ -415,7 +417,7 @@ def material_class(name: str) -> type[Material]:
     ParameterError
         No such model.
     """
-    if name not in CLASSES:
+    if not isinstance(name, str) or name not in CLASSES:
         raise ParameterError(f"model: expected one of {list(CLASSES)}, got {name!r}", "model")
     return CLASSES[name]
 

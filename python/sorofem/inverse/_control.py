@@ -7,8 +7,9 @@ import time
 from typing import Any, Sequence
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
+from .._validate import MAX_EVALUATIONS, boolean, count, describe, positive_scalar
 from ..cables import cable_index
 from ..errors import InputError
 from ..progress import Progress
@@ -20,6 +21,17 @@ from ._problem import scenarios as make_scenarios
 from .results import ControlResult
 
 __all__ = ["control"]
+
+
+def _bound_pairs(bounds: Any, n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(lo, hi)`` per controlled cable, shape ``(n, 2)`` (each cable's kind checks its own)."""
+    try:
+        arr = np.asarray(bounds, dtype=np.float64)
+    except (TypeError, ValueError):
+        arr = np.zeros(0)
+    if arr.shape != (n, 2):
+        raise InputError(f"bounds: expected one (lo, hi) per controlled cable, shape ({n}, 2), got {describe(bounds)}")
+    return arr[:, 0], arr[:, 1]
 
 
 def control(
@@ -95,8 +107,14 @@ def control(
     ...                  gravity=(0, 0, -9.81))  # doctest: +SKIP
     >>> ctl.actuation, ctl.reachable, ctl.distance  # doctest: +SKIP
     """
-    if method not in ("l-bfgs-b", "nelder-mead"):
-        raise InputError(f"method: expected 'l-bfgs-b' or 'nelder-mead', got {method!r}")
+    if not isinstance(method, str) or method not in ("l-bfgs-b", "nelder-mead"):
+        raise InputError(f"method: expected 'l-bfgs-b' or 'nelder-mead', got {describe(method)}")
+    tolerance = positive_scalar(tolerance, "tolerance")
+    max_evaluations = count(max_evaluations, "max_evaluations", 1, MAX_EVALUATIONS)
+    xtol, ftol = positive_scalar(xtol, "xtol"), positive_scalar(ftol, "ftol")
+    verbose = boolean(verbose, "verbose")
+    if cables is not None and (isinstance(cables, (str, bytes)) or not isinstance(cables, Sequence)):
+        raise InputError(f"cables: expected a list of cables (sorofem.Cable or indices), got {describe(cables)}")
     t0 = time.perf_counter()
     ids = list(range(len(body.cables))) if cables is None else [cable_index(body, c) for c in cables]
     if not ids:
@@ -112,16 +130,16 @@ def control(
                       for c, kind in zip(ids, kinds)])
     if bounds is None:
         bounds = [_default_bounds(body, c, kind) for c, kind in zip(ids, kinds)]
-    if len(bounds) != n:
-        raise InputError(f"bounds: expected one (lo, hi) per controlled cable ({n}), got {len(bounds)}")
-    lo_u = np.array([b[0] for b in bounds], dtype=np.float64)
-    hi_u = np.array([b[1] for b in bounds], dtype=np.float64)
+    lo_u, hi_u = _bound_pairs(bounds, n)
     for i, (c, kind) in enumerate(zip(ids, kinds)):
         _check_bounds(body, c, kind, lo_u[i], hi_u[i])
     if x0 is None:
         theta0_u = np.where(np.array(kinds) == "cable_actuation", np.sqrt(np.abs(lo_u * hi_u)), 0.5 * (lo_u + hi_u))
     else:
-        theta0_u = np.asarray(x0, dtype=np.float64).reshape(-1)
+        try:
+            theta0_u = np.asarray(x0, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            raise InputError(f"x0: expected {n} finite commands (alphas > 0), got {describe(x0)}") from None
         if theta0_u.shape != (n,) or not all(
             np.isfinite(v) and (v > 0 or kind != "cable_actuation") for v, kind in zip(theta0_u, kinds)
         ):
