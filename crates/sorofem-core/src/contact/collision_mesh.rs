@@ -144,7 +144,8 @@ impl CollisionMesh {
         self.rest.len()
     }
 
-    /// Rest positions of all vertices (m).
+    /// Positions of all vertices at rest (m): the body's rest nodes, then the obstacles' vertices
+    /// where this geometry holds them.
     pub fn rest(&self) -> &[Vec3] {
         &self.rest
     }
@@ -214,8 +215,37 @@ impl CollisionMesh {
         }
     }
 
-    /// Positions of all vertices: the body's from `body` (flat, `3 n_body`, m), the obstacles' at
-    /// rest (static obstacles).
+    /// The same geometry with obstacle `k` translated by `translations[k]` (m): its mesh
+    /// vertices, a plane's point, a sphere's centre. The body is unchanged. Moving obstacles
+    /// follow prescribed paths this way, one copy per time step.
+    pub fn moved(&self, translations: &[Vec3]) -> Self {
+        assert_eq!(
+            translations.len(),
+            self.obstacles.len(),
+            "one translation per obstacle"
+        );
+        let mut out = self.clone();
+        for (k, (obstacle, t)) in out.obstacles.iter_mut().zip(translations).enumerate() {
+            match obstacle {
+                Obstacle::Plane(plane) => plane.point += t,
+                Obstacle::Sphere(sphere) => sphere.center += t,
+                Obstacle::Mesh(mesh) => {
+                    let (_, offset) = self
+                        .mesh_obstacle_offsets
+                        .iter()
+                        .find(|(index, _)| *index == k)
+                        .expect("every mesh obstacle has an offset");
+                    for v in &mut out.rest[*offset..offset + mesh.vertices().len()] {
+                        *v += t;
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// Positions of all vertices: the body's from `body` (flat, `3 n_body`, m), the obstacles'
+    /// where this geometry holds them (see [`CollisionMesh::moved`]).
     pub fn vertices(&self, body: &[f64]) -> Result<Vec<Vec3>> {
         if body.len() != 3 * self.n_body {
             return Err(Error::shape(

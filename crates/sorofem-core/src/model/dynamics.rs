@@ -1,11 +1,16 @@
 //! Dynamics: implicit Euler in time, each step a minimisation of the incremental potential
 //! through the same Newton solver as statics.
 
-use super::system::{StepTerms, System};
+use super::system::{ContactSolve, FrictionLag, StepTerms, System};
 use super::{Loads, Model};
+use crate::contact::ccd::DEFAULT_MIN_SEPARATION;
+use crate::contact::ContactForces;
 use crate::energy::HessianMode;
 use crate::error::{Error, Result};
 use crate::newton::{self, NewtonOptions};
+
+/// How many times a time step may be halved (a step becomes at most 64 sub-steps).
+const MAX_STEP_SPLITS: usize = 6;
 
 /// Rayleigh damping `C = mass M + stiffness K` (1/s and s).
 #[derive(Clone, Copy, Debug, Default)]
@@ -29,6 +34,19 @@ pub struct Trajectory {
     pub iterations: Vec<usize>,
     /// Times a step was halved after a Newton failure.
     pub cutbacks: usize,
+    /// With obstacles: the contact at every saved frame.
+    pub contact: Vec<ContactFrame>,
+    /// With obstacles: the minimum distance (m) between the body and its obstacles at every
+    /// accepted Newton iterate of every step (over the stencils within `dhat`, `+inf` when none).
+    pub iterate_min_distances: Vec<f64>,
+}
+
+/// The contact of one saved frame: its forces and where each obstacle is (its translation from
+/// its place at time 0, m).
+#[derive(Clone, Debug, Default)]
+pub struct ContactFrame {
+    pub forces: ContactForces,
+    pub translations: Vec<[f64; 3]>,
 }
 
 impl Model {
@@ -39,6 +57,11 @@ impl Model {
     /// alpha during step s. Starts from `initial_positions` (3 n, m; default rest; free cable nodes
     /// and pressures then continue from the last solve) at rest or with `initial_velocities`
     /// (3 n, m/s).
+    ///
+    /// Obstacles move along their paths; each step first moves them to where they are at its end
+    /// (split, like a failed step, when that would make them touch the body), lags friction at
+    /// the step's start (`eps_u = eps_v h`), starts Newton from the inertial prediction cut
+    /// short of any contact, and balances the barrier stiffness there (IPC's initial stiffness).
     #[allow(clippy::too_many_arguments)]
     pub fn simulate(
         &mut self,
@@ -79,6 +102,12 @@ impl Model {
         let full_load = self.load_vector(loads);
         let rest = self.mesh.rest_flat();
         let mut z = self.start_state("initial_positions", initial_positions)?;
+        if let Some(contact) = &mut self.terms.contact {
+            contact.set_time(0.0);
+            contact.clear_friction();
+        }
+        self.check_apart("initial_positions", &z)?;
+        self.prepare_contact();
         let free: Vec<usize> = self.assembler.full_of_free().to_vec();
         let mass_full = self.terms.mass.per_dof(self.layout.n_full());
         let mass: Vec<f64> = free.iter().map(|&d| mass_full[d]).collect();
@@ -116,6 +145,14 @@ impl Model {
         let mut trajectory = Trajectory::default();
         let save =
             |model: &Model, z: &[f64], velocity: &[f64], t: f64, trajectory: &mut Trajectory| {
+                if let Some(contact) = &model.terms.contact {
+                    trajectory.contact.push(ContactFrame {
+                        forces: contact.forces(z),
+                        translations: (0..contact.n_obstacles())
+                            .map(|k| contact.translation_at(k, t).into())
+                            .collect(),
+                    });
+                }
                 trajectory.times.push(t);
                 trajectory
                     .positions
@@ -140,7 +177,31 @@ impl Model {
             // Halve the step on failure: a queue of sub-steps that must add up to dt.
             let mut pending = vec![(dt, 0usize)];
             let mut iterations = 0;
+            let mut sub_time = time;
             while let Some((h, depth)) = pending.pop() {
+                // Obstacles move first, with the body where it is: a motion that would touch it
+                // splits the step.
+                if let Some(contact) = &mut self.terms.contact {
+                    let end = sub_time + h;
+                    if contact.obstacle_motion_bound(&z, end, DEFAULT_MIN_SEPARATION) < 1.0 {
+                        if depth < MAX_STEP_SPLITS {
+                            trajectory.cutbacks += 1;
+                            pending.push((h / 2.0, depth + 1));
+                            pending.push((h / 2.0, depth + 1));
+                            continue;
+                        }
+                        return Err(Error::invalid(
+                            "obstacles",
+                            "paths along which the obstacles do not run into the body faster than it can move away",
+                            format!(
+                                "time step {s} (t = {time:.4} s): an obstacle would touch the body even at dt = {h:.3e} s"
+                            ),
+                        ));
+                    }
+                    contact.set_time(end);
+                    let slip = contact.friction_velocity() * h;
+                    contact.lag_friction(&z, &z, slip);
+                }
                 let previous: Vec<f64> = free.iter().map(|&d| z[d]).collect();
                 let predicted: Vec<f64> = previous
                     .iter()
@@ -180,10 +241,21 @@ impl Model {
                     stiffness_damping,
                     diagonal: diagonal.clone(),
                 };
+                // The inertial prediction, cut short of any contact on the way.
+                let mut reach = 1.0;
+                if let Some(contact) = &self.terms.contact {
+                    let mut dz = vec![0.0; 3 * n];
+                    for (f, &d) in free.iter().enumerate() {
+                        if d < 3 * n {
+                            dz[d] = predicted[f] - previous[f];
+                        }
+                    }
+                    reach = contact.max_step(&z, &dz, DEFAULT_MIN_SEPARATION);
+                }
                 let mut trial = z.clone();
                 for (f, &d) in free.iter().enumerate() {
                     if f < n_free_displacement {
-                        trial[d] = predicted[f];
+                        trial[d] = previous[f] + reach * (predicted[f] - previous[f]);
                     }
                 }
                 let mut problem = System::new(
@@ -193,13 +265,27 @@ impl Model {
                     Some(step),
                     options,
                 );
+                if problem.model.terms.contact.is_some() {
+                    problem.contact = Some(ContactSolve::new(FrictionLag::Fixed, true));
+                }
                 problem.model.terms.cables.begin_step(h, &z);
                 let outcome =
                     rayon::scope(|_| newton::solve(&mut problem, &mut trial, &step_options));
                 problem.model.terms.cables.end_step();
+                if let Some(solve) = problem.contact.take() {
+                    trajectory
+                        .iterate_min_distances
+                        .extend(solve.iterate_min_distances);
+                }
                 drop(problem);
+                if outcome.is_err() {
+                    if let Some(contact) = &mut self.terms.contact {
+                        contact.set_time(sub_time);
+                    }
+                }
                 match outcome {
                     Ok(report) => {
+                        sub_time += h;
                         iterations += report.iterations;
                         for (f, &d) in free.iter().enumerate() {
                             velocity[f] = if f < n_free_displacement {
@@ -210,7 +296,7 @@ impl Model {
                         }
                         z = trial;
                     }
-                    Err(Error::NotConverged { report, .. }) if depth < 6 => {
+                    Err(Error::NotConverged { report, .. }) if depth < MAX_STEP_SPLITS => {
                         iterations += report.iterations;
                         trajectory.cutbacks += 1;
                         pending.push((h / 2.0, depth + 1));

@@ -4,16 +4,24 @@
 //! model.
 
 use super::statics::Loads;
+use crate::contact::ContactTerm;
 use crate::energy::{
     CableTerm, ElasticTerm, GravityTerm, LumpedMass, NodalForceTerm, ParamTerm, PointGravityTerm,
     Term,
 };
 
 /// Every energy term of a model, and the lumped mass that gravity and inertia act on.
+///
+/// Contact is a term whose stencils change with the positions, so the assembler's fixed element
+/// plans cannot hold it: the Newton system (`system.rs`) adds it after the assembler's pass,
+/// into the same gradient and Hessian values (see [`ContactTerm::add_to`]), and reactions and
+/// sensitivities add it where they add the internal terms. Its parameters (`dhat`, the barrier
+/// stiffness) are not among the sensitivities' parameters.
 pub(crate) struct Terms {
     pub elastic: ElasticTerm,
     pub cables: CableTerm,
     pub mass: LumpedMass,
+    pub contact: Option<ContactTerm>,
 }
 
 /// The loads of one solve as terms. They are linear in the displacements, so they enter Newton
