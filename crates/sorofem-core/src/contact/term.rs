@@ -117,6 +117,8 @@ pub struct ContactTerm {
     lagged_slip: f64,
     bbox_diagonal: f64,
     mean_edge: f64,
+    /// Check every accepted iterate for intersections in full (see [`ContactTerm::set_audit`]).
+    audit: bool,
 }
 
 impl ContactTerm {
@@ -199,6 +201,7 @@ impl ContactTerm {
             lagged_slip: friction_slip,
             bbox_diagonal: 0.0,
             mean_edge,
+            audit: false,
         };
         term.set_time(0.0);
         term.bbox_diagonal = term.scene_diagonal();
@@ -222,6 +225,22 @@ impl ContactTerm {
     /// Mean length of the body's boundary edges at rest (m).
     pub fn mean_edge(&self) -> f64 {
         self.mean_edge
+    }
+
+    /// A diagnostic for tests: solves check every accepted iterate for intersections with
+    /// [`super::check::find_intersection`] (every body node, edge and triangle, not only the
+    /// stencils within `dhat`) and record one as a minimum distance of `-inf`.
+    pub fn set_audit(&mut self, on: bool) {
+        self.audit = on;
+    }
+
+    pub fn audit(&self) -> bool {
+        self.audit
+    }
+
+    /// Whether the body at `z` touches or intersects an obstacle (the audit's test).
+    pub fn intersects(&self, z: &[f64]) -> bool {
+        super::check::find_intersection(&self.mesh, &self.positions(z)).is_some()
     }
 
     /// Whether any obstacle has friction.

@@ -36,6 +36,14 @@ impl Model {
         Ok(())
     }
 
+    /// Turns the contact audit on or off (see [`ContactTerm::set_audit`]); no effect without
+    /// obstacles.
+    pub fn set_contact_audit(&mut self, on: bool) {
+        if let Some(term) = &mut self.terms.contact {
+            term.set_audit(on);
+        }
+    }
+
     /// The contact term, when the model has obstacles.
     pub fn contact(&self) -> Option<&ContactTerm> {
         self.terms.contact.as_ref()

@@ -63,8 +63,11 @@ pub(super) struct ContactSolve {
     /// iterate.
     last_min_d2: f64,
     accepted_min_d2: f64,
-    /// Minimum distance (m) at every accepted iterate (`+inf`: nothing within `dhat`).
+    /// Minimum distance (m) at every accepted iterate (`+inf`: nothing within `dhat`; `-inf`:
+    /// the audit found an intersection).
     pub(super) iterate_min_distances: Vec<f64>,
+    /// The state last evaluated, kept for the audit (see [`crate::contact::ContactTerm::set_audit`]).
+    last_z: Vec<f64>,
     /// Seconds in contact passes (broad phase, stencils, scatter) and in the step bounds.
     pub(super) seconds: f64,
 }
@@ -79,6 +82,7 @@ impl ContactSolve {
             last_min_d2: f64::INFINITY,
             accepted_min_d2: f64::INFINITY,
             iterate_min_distances: Vec::new(),
+            last_z: Vec::new(),
             seconds: 0.0,
         }
     }
@@ -225,6 +229,9 @@ impl System<'_> {
         });
         let pass = term.add_to(&self.model.assembler, z, gradient, hessian);
         solve.last_min_d2 = pass.min_squared_distance;
+        if term.audit() {
+            solve.last_z = z.to_vec();
+        }
         solve.seconds += t0.elapsed().as_secs_f64();
         pass.energy
     }
@@ -573,7 +580,12 @@ impl System<'_> {
         };
         let previous = solve.accepted_min_d2;
         solve.accepted_min_d2 = solve.last_min_d2;
-        solve.iterate_min_distances.push(solve.last_min_d2.sqrt());
+        let distance = if term.audit() && term.intersects(&solve.last_z) {
+            f64::NEG_INFINITY
+        } else {
+            solve.last_min_d2.sqrt()
+        };
+        solve.iterate_min_distances.push(distance);
         term.update_stiffness(previous, solve.last_min_d2)
     }
 }
