@@ -130,3 +130,100 @@ fn a_cantilever_sags_onto_a_plane_below_its_tip() {
     assert!(residual <= 1e-8 * weight, "balance {balance:?}");
     assert!(contact.iterate_min_distances.iter().all(|&d| d > 0.0));
 }
+
+/// The cantilever of the previous test on its plane, frictionless: `c . x` and the plane's
+/// normal force at the equilibrium for the shear moduli `mu` and gravity `g`.
+fn pressed_cantilever() -> (Model, Vec<f64>) {
+    let mut model = cantilever(
+        [0.4, 0.1, 0.1],
+        [8, 2, 2],
+        66e3,
+        0.45,
+        1080.0,
+        Formulation::Standard,
+    );
+    model
+        .set_contact(ContactSetup {
+            obstacles: vec![plane([0.0, 0.0, -0.13], [0.0, 0.0, 1.0], 0.0)],
+            ..Default::default()
+        })
+        .unwrap();
+    let m = model.mesh().n_tets();
+    let (mu, _) = lame_from_young(66e3, 0.45);
+    let mut rng = common::Rng::new(3);
+    let mus = (0..m).map(|_| mu * (1.0 + 0.2 * rng.next())).collect();
+    (model, mus)
+}
+
+#[test]
+fn sensitivities_through_frictionless_contact_match_finite_differences() {
+    let (mut model, mus) = pressed_cantilever();
+    let m = model.mesh().n_tets();
+    let (_, lambda) = lame_from_young(66e3, 0.45);
+    let mut rng = common::Rng::new(5);
+    let c: Vec<f64> = rng.vec(3 * model.mesh().n_nodes(), 1.0);
+    let dmu: Vec<f64> = (0..m).map(|_| 2e3 * rng.next()).collect();
+    let dg = [0.3, -0.2, 1.0];
+    let options = SolveOptions {
+        tolerance: 1e-12,
+        ..Default::default()
+    };
+    // O(e) = (c . x, F_z) at mu + e dmu, g + e dg.
+    let mut solve_at = |model: &mut Model, e: f64| -> (f64, f64) {
+        let shifted: Vec<f64> = mus.iter().zip(&dmu).map(|(a, b)| a + e * b).collect();
+        model
+            .set_material(&Material {
+                mu: shifted,
+                lambda: vec![lambda; m],
+                density: vec![1080.0; m],
+            })
+            .unwrap();
+        let loads = Loads {
+            gravity: std::array::from_fn(|k| [0.0, 0.0, -G][k] + e * dg[k]),
+            ..Default::default()
+        };
+        let s = model.solve(&loads, None, &options).unwrap();
+        let contact = s.contact.unwrap();
+        assert!(contact.forces.active[0] > 0);
+        (
+            s.positions.iter().zip(&c).map(|(x, ci)| x * ci).sum(),
+            contact.forces.per_obstacle[0][2],
+        )
+    };
+    let h = 1e-3;
+    let (plus, minus) = (solve_at(&mut model, h), solve_at(&mut model, -h));
+    let fd = (
+        (plus.0 - minus.0) / (2.0 * h),
+        (plus.1 - minus.1) / (2.0 * h),
+    );
+    solve_at(&mut model, 0.0);
+    let mut delta = model.param_zeros();
+    *delta.get_mut("mu").unwrap() = dmu.clone();
+    *delta.get_mut("gravity").unwrap() = dg.to_vec();
+    let dot = |g: &sorofem_core::sensitivity::ParamVector| -> f64 {
+        g.get("mu")
+            .unwrap()
+            .iter()
+            .zip(&dmu)
+            .map(|(a, b)| a * b)
+            .sum::<f64>()
+            + g.get("gravity")
+                .unwrap()
+                .iter()
+                .zip(&dg)
+                .map(|(a, b)| a * b)
+                .sum::<f64>()
+    };
+    let (dx, _) = model.forward(&delta).unwrap();
+    let forward: f64 = dx.iter().zip(&c).map(|(a, b)| a * b).sum();
+    let adjoint = dot(&model.adjoint(&c).unwrap());
+    let force_weights = model.contact_force_gradient(0, [0.0, 0.0, 1.0]).unwrap();
+    let force_adjoint = dot(&model.adjoint(&force_weights).unwrap());
+    println!(
+        "c.x: forward {forward:.8e}, adjoint {adjoint:.8e}, FD {:.8e}; F_z: adjoint {force_adjoint:.8e}, FD {:.8e}",
+        fd.0, fd.1
+    );
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-5 * a.abs().max(b.abs());
+    assert!(close(forward, fd.0) && close(adjoint, fd.0));
+    assert!(close(force_adjoint, fd.1));
+}
