@@ -134,7 +134,8 @@ def write_result(
     """Write a result (normally ``.vtu``) for ParaView.
 
     The points are the **deformed** positions. Point data: ``displacement`` (m),
-    ``pressure`` (Pa, mixed formulations only) and ``extra_point_data``; cell data:
+    ``pressure`` (Pa, mixed formulations only), ``contact_force`` (N, the obstacles' force on
+    each node, bodies with obstacles only) and ``extra_point_data``; cell data:
     ``J`` (volume ratio) and ``von_mises`` (Pa). Use ParaView's "Warp By Vector" with
     scale -1 on ``displacement`` to see the rest shape.
 
@@ -151,6 +152,8 @@ def write_result(
     point_data: dict[str, np.ndarray] = {"displacement": result.displacement}
     if result.pressure is not None:
         point_data["pressure"] = result.pressure
+    if getattr(result, "contact", None) is not None:
+        point_data["contact_force"] = np.asarray(result.contact_forces)
     for name, values in (extra_point_data or {}).items():
         arr = np.asarray(values)
         if arr.shape[:1] != (mesh.n_nodes,):

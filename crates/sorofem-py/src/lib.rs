@@ -183,6 +183,151 @@ fn legacy_param_key(name: &str) -> Option<&'static str> {
     }
 }
 
+/// The contact forces of a state as a dict: "forces" (n, 3), "obstacle_forces" (k, 3) N,
+/// "min_distance" (k,) m (NaN: nothing within the report radius), "active" (k,).
+fn contact_forces_to_dict<'py>(
+    py: Python<'py>,
+    forces: &sorofem_core::contact::ContactForces,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item(
+        "forces",
+        convert::points_to_numpy(py, forces.nodal.as_flattened()),
+    )?;
+    d.set_item(
+        "obstacle_forces",
+        convert::points_to_numpy(py, forces.per_obstacle.as_flattened()),
+    )?;
+    let distances: Vec<f64> = forces
+        .min_distance
+        .iter()
+        .map(|d| d.unwrap_or(f64::NAN))
+        .collect();
+    d.set_item("min_distance", PyArray1::from_vec(py, distances))?;
+    let active: Vec<i64> = forces.active.iter().map(|&a| a as i64).collect();
+    d.set_item("active", PyArray1::from_vec(py, active))?;
+    Ok(d)
+}
+
+/// The contact kernels at one configuration of four points `x` (4, 3), for the comparison with
+/// ipctk in the tests: squared point-triangle and edge-edge distances (point 0 and triangle
+/// 1-3; edges 0-1 and 2-3) with gradients (12,) and Hessians (12, 12), the edge-edge mollifier
+/// (threshold from `x` itself), and the barrier b(d; dhat^2) and its two derivatives at the
+/// point-triangle distance d.
+#[pyfunction]
+fn _contact_reference<'py>(
+    py: Python<'py>,
+    x: &Bound<'py, PyAny>,
+    dhat: f64,
+) -> PyResult<Bound<'py, PyDict>> {
+    use sorofem_core::contact::barrier::{barrier, barrier_gradient, barrier_hessian};
+    use sorofem_core::contact::distance::{
+        edge_edge_feature, edge_edge_mollifier_derivatives, edge_edge_mollifier_threshold,
+        feature_distance_derivatives, point_triangle_feature, Derivatives,
+    };
+    use sorofem_core::contact::Vec3;
+    let points = convert::points("x", x).py(py)?;
+    if points.len() != 4 {
+        return Err(errors::to_py(
+            py,
+            sorofem_core::Error::shape("x", "shape (4, 3)", format!("shape ({}, 3)", points.len())),
+        ));
+    }
+    let p: Vec<Vec3> = points.iter().map(|&q| Vec3::from(q)).collect();
+    let r: Vec<&Vec3> = p.iter().collect();
+    let out = PyDict::new(py);
+    let put = |name: &str, d: &Derivatives<12>| -> PyResult<()> {
+        let entry = PyDict::new(py);
+        entry.set_item("value", d.value)?;
+        entry.set_item("gradient", PyArray1::from_slice(py, d.gradient.as_slice()))?;
+        let hessian = PyArray1::from_slice(py, d.hessian.as_slice()).reshape([12, 12])?;
+        // nalgebra stores column-major: the transpose of the row-major reshape (symmetric anyway).
+        entry.set_item("hessian", hessian.transpose()?)?;
+        out.set_item(name, entry)
+    };
+    let pt = feature_distance_derivatives(&point_triangle_feature(r[0], r[1], r[2], r[3]), &r);
+    put("point_triangle", &pt)?;
+    put(
+        "edge_edge",
+        &feature_distance_derivatives(&edge_edge_feature(r[0], r[1], r[2], r[3]), &r),
+    )?;
+    let eps_x = edge_edge_mollifier_threshold(r[0], r[1], r[2], r[3]);
+    put(
+        "mollifier",
+        &edge_edge_mollifier_derivatives(r[0], r[1], r[2], r[3], eps_x),
+    )?;
+    out.set_item("mollifier_threshold", eps_x)?;
+    let dhat2 = dhat * dhat;
+    out.set_item(
+        "barrier",
+        (
+            barrier(pt.value, dhat2),
+            barrier_gradient(pt.value, dhat2),
+            barrier_hessian(pt.value, dhat2),
+        ),
+    )?;
+    Ok(out)
+}
+
+/// Checks an obstacle description (see the binding's `obstacle_spec`) as the core will build
+/// it; returns {"closed": bool, "vertices": (n, 3) m, "triangles": (m, 3)} for boxes and
+/// meshes, {"closed": True} for planes and spheres.
+#[pyfunction]
+fn check_obstacle<'py>(
+    py: Python<'py>,
+    obstacle: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyDict>> {
+    use sorofem_core::contact::Obstacle;
+    let spec = convert::obstacle_spec(0, obstacle).py(py)?;
+    let out = PyDict::new(py);
+    match &spec.obstacle {
+        Obstacle::Mesh(mesh) => {
+            out.set_item("closed", mesh.is_closed())?;
+            let flat: Vec<f64> = mesh
+                .vertices()
+                .iter()
+                .flat_map(|v| [v[0], v[1], v[2]])
+                .collect();
+            out.set_item("vertices", convert::points_to_numpy(py, &flat))?;
+            out.set_item("triangles", convert::faces_to_numpy(py, mesh.triangles()))?;
+        }
+        Obstacle::Plane(_) | Obstacle::Sphere(_) => out.set_item("closed", true)?,
+    }
+    Ok(out)
+}
+
+/// Checks obstacles against a body mesh at rest (each apart from it: the error names the
+/// obstacle, the node or triangle and the distance) and the contact settings; returns
+/// {"dhat": m}, the activation distance in force (the default when `dhat` is None).
+#[pyfunction]
+#[pyo3(signature = (points, tets, obstacles, dhat = None))]
+fn check_contact<'py>(
+    py: Python<'py>,
+    points: &Bound<'py, PyAny>,
+    tets: &Bound<'py, PyAny>,
+    obstacles: &Bound<'py, PyList>,
+    dhat: Option<f64>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (mesh, _) = build_mesh(py, points, tets, Orientation::Reject)?;
+    let obstacles = obstacles
+        .iter()
+        .enumerate()
+        .map(|(k, item)| convert::obstacle_spec(k, &item))
+        .collect::<Result<Vec<_>, _>>()
+        .py(py)?;
+    let setup = sorofem_core::contact::ContactSetup {
+        obstacles,
+        dhat,
+        ..Default::default()
+    };
+    let term = py
+        .detach(|| sorofem_core::contact::ContactTerm::try_new(&mesh, setup))
+        .py(py)?;
+    let out = PyDict::new(py);
+    out.set_item("dhat", term.dhat())?;
+    Ok(out)
+}
+
 /// A body ready to be solved many times (see sorofem.model.Body, which owns one).
 #[pyclass(module = "sorofem._core")]
 struct Model {
@@ -353,7 +498,102 @@ impl Model {
             Some(p) => out.set_item("pressure", PyArray1::from_vec(py, p))?,
             None => out.set_item("pressure", py.None())?,
         }
+        match &solution.contact {
+            Some(contact) => {
+                let d = contact_forces_to_dict(py, &contact.forces)?;
+                d.set_item("stiffness", contact.stiffness)?;
+                d.set_item("dhat", contact.dhat)?;
+                d.set_item(
+                    "iterate_min_distances",
+                    contact.iterate_min_distances.clone(),
+                )?;
+                out.set_item("contact", d)?
+            }
+            None => out.set_item("contact", py.None())?,
+        }
         Ok(out)
+    }
+
+    /// Sets (replaces) the obstacles: a list of dicts (see the binding's `obstacle_spec`:
+    /// "kind" and its geometry, "friction", "path"), the activation distance `dhat` (m), the
+    /// reference barrier stiffness (J/m^4), the static friction slip (m) and the dynamic friction
+    /// velocity (m/s); `None` takes the core's defaults. An empty list removes contact.
+    #[pyo3(signature = (obstacles, dhat = None, stiffness = None, friction_slip = None, friction_velocity = None))]
+    fn set_contact(
+        &mut self,
+        py: Python<'_>,
+        obstacles: &Bound<'_, PyList>,
+        dhat: Option<f64>,
+        stiffness: Option<f64>,
+        friction_slip: Option<f64>,
+        friction_velocity: Option<f64>,
+    ) -> PyResult<()> {
+        let obstacles = obstacles
+            .iter()
+            .enumerate()
+            .map(|(k, item)| convert::obstacle_spec(k, &item))
+            .collect::<Result<Vec<_>, _>>()
+            .py(py)?;
+        let setup = sorofem_core::contact::ContactSetup {
+            obstacles,
+            dhat,
+            stiffness,
+            friction_slip,
+            friction_velocity,
+        };
+        let inner = &mut self.inner;
+        py.detach(|| inner.set_contact(setup)).py(py)
+    }
+
+    /// The contact settings in force: {"dhat": m, "stiffness": J/m^4 or None before the first
+    /// solve, "n_obstacles"}, or None without obstacles.
+    fn contact_settings<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(contact) = self.inner.contact() else {
+            return Ok(None);
+        };
+        let d = PyDict::new(py);
+        d.set_item("dhat", contact.dhat())?;
+        d.set_item("stiffness", contact.reference_stiffness())?;
+        d.set_item("n_obstacles", contact.n_obstacles())?;
+        Ok(Some(d))
+    }
+
+    /// Contact forces at node positions (n, 3), m: a dict with "forces" (n, 3) and
+    /// "obstacle_forces" (k, 3) in N (exerted on the body), "min_distance" (k,) m (NaN: nothing
+    /// near), "active" (k,); None without obstacles.
+    fn contact_forces<'py>(
+        &self,
+        py: Python<'py>,
+        positions: &Bound<'py, PyAny>,
+    ) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let positions: Vec<f64> = convert::points("positions", positions)
+            .py(py)?
+            .into_iter()
+            .flatten()
+            .collect();
+        match self.inner.contact_forces(&positions).py(py)? {
+            Some(forces) => Ok(Some(contact_forces_to_dict(py, &forces)?)),
+            None => Ok(None),
+        }
+    }
+
+    /// `d(w . F_k)/dx` (n, 3) at the last equilibrium: the gradient of the force obstacle
+    /// `obstacle` exerts on the body, along `weights` (3,), with respect to the node positions.
+    fn contact_force_gradient<'py>(
+        &self,
+        py: Python<'py>,
+        obstacle: usize,
+        weights: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let w = convert::vec3("weights", weights).py(py)?;
+        let g = self.inner.contact_force_gradient(obstacle, w).py(py)?;
+        Ok(convert::points_to_numpy(py, &g))
+    }
+
+    /// Checks every accepted Newton iterate for intersections in full (a test diagnostic): one
+    /// records a minimum distance of -inf.
+    fn set_contact_audit(&mut self, on: bool) {
+        self.inner.set_contact_audit(on);
     }
 
     /// Implicit Euler dynamics; returns a dict with "times", "positions" (frames, n, 3),
@@ -443,6 +683,61 @@ impl Model {
         )?;
         out.set_item("iterations", trajectory.iterations)?;
         out.set_item("cutbacks", trajectory.cutbacks)?;
+        if !trajectory.contact.is_empty() {
+            let frames = trajectory.contact.len();
+            let k = trajectory.contact[0].translations.len();
+            let nodal: Vec<f64> = trajectory
+                .contact
+                .iter()
+                .flat_map(|c| c.forces.nodal.iter().flatten().copied())
+                .collect();
+            let per_obstacle: Vec<f64> = trajectory
+                .contact
+                .iter()
+                .flat_map(|c| c.forces.per_obstacle.iter().flatten().copied())
+                .collect();
+            let translations: Vec<f64> = trajectory
+                .contact
+                .iter()
+                .flat_map(|c| c.translations.iter().flatten().copied())
+                .collect();
+            let distances: Vec<f64> = trajectory
+                .contact
+                .iter()
+                .flat_map(|c| c.forces.min_distance.iter().map(|d| d.unwrap_or(f64::NAN)))
+                .collect();
+            let active: Vec<i64> = trajectory
+                .contact
+                .iter()
+                .flat_map(|c| c.forces.active.iter().map(|&a| a as i64))
+                .collect();
+            let d = PyDict::new(py);
+            d.set_item(
+                "forces",
+                PyArray1::from_vec(py, nodal).reshape([frames, n, 3])?,
+            )?;
+            d.set_item(
+                "obstacle_forces",
+                PyArray1::from_vec(py, per_obstacle).reshape([frames, k, 3])?,
+            )?;
+            d.set_item(
+                "translations",
+                PyArray1::from_vec(py, translations).reshape([frames, k, 3])?,
+            )?;
+            d.set_item(
+                "min_distance",
+                PyArray1::from_vec(py, distances).reshape([frames, k])?,
+            )?;
+            d.set_item(
+                "active",
+                PyArray1::from_vec(py, active).reshape([frames, k])?,
+            )?;
+            d.set_item(
+                "iterate_min_distances",
+                trajectory.iterate_min_distances.clone(),
+            )?;
+            out.set_item("contact", d)?;
+        }
         Ok(out)
     }
 
@@ -562,6 +857,9 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(check_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(rest_volumes, m)?)?;
     m.add_function(wrap_pyfunction!(boundary_faces, m)?)?;
+    m.add_function(wrap_pyfunction!(_contact_reference, m)?)?;
+    m.add_function(wrap_pyfunction!(check_obstacle, m)?)?;
+    m.add_function(wrap_pyfunction!(check_contact, m)?)?;
     m.add_class::<Model>()?;
     Ok(())
 }
