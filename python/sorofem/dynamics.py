@@ -211,6 +211,20 @@ class Trajectory:
         The alphas used, ``(steps, n_cables)``.
     timings
         ``{"simulate": s}``: wall-clock time of the integration.
+    contact_forces
+        With obstacles: the force they exert on each node at each frame, ``(frames, n_nodes,
+        3)``, N (``None`` without obstacles).
+    obstacle_forces
+        Total force of each obstacle on the body, ``(frames, n_obstacles, 3)``, N.
+    obstacle_translations
+        Where each obstacle is (its path's translation), ``(frames, n_obstacles, 3)``, m.
+    min_distances
+        Smallest distance to each obstacle, ``(frames, n_obstacles)``, m (NaN: nothing near).
+    active_contacts
+        Contact stencils closer than ``dhat`` per obstacle, ``(frames, n_obstacles)``.
+    iterate_min_distances
+        Minimum distance to the obstacles at every accepted Newton iterate of every step
+        (``inf``: nothing within ``dhat``): all > 0.
     """
 
     def __init__(self, body: Body, dt: float, out: Mapping[str, Any], actuation: NDArray[np.float64], elapsed: float) -> None:
@@ -228,6 +242,20 @@ class Trajectory:
         #: The cables' alphas before the first step, ``(n_cables,)``.
         self.initial_actuation = np.asarray(body.actuations, dtype=np.float64)
         self.timings = {"simulate": elapsed}
+        contact = out.get("contact")
+        k = len(body.obstacles)
+        frames = self.times.size
+
+        def field(key: str, shape: tuple[int, ...], dtype: Any = np.float64) -> NDArray[Any] | None:
+            return None if contact is None else np.asarray(contact[key], dtype=dtype).reshape(frames, *shape)
+
+        self.contact_forces = field("forces", (-1, 3))
+        self.obstacle_forces = field("obstacle_forces", (k, 3))
+        self.obstacle_translations = field("translations", (k, 3))
+        self.min_distances = field("min_distance", (k,))
+        self.active_contacts = field("active", (k,), np.int64)
+        self.iterate_min_distances = np.asarray([] if contact is None else contact["iterate_min_distances"],
+                                                dtype=np.float64)
 
     @property
     def n_frames(self) -> int:
@@ -281,16 +309,21 @@ class Trajectory:
             x = self.positions[f]
             j = np.asarray(model.element_fields(x)["J"], dtype=np.float64)
             points, disp = x, x - self.mesh.points
+            point_data = {"displacement": disp}
+            if self.contact_forces is not None:
+                point_data["contact_force"] = self.contact_forces[f]
             cells: list[tuple[str, NDArray[np.int64]]] = [("tetra", tets)]
             cell_j = [j]
             if lines is not None and f < len(self.cable_points):
                 cable_x = np.vstack(self.cable_points[f])
                 points = np.vstack([x, cable_x])
                 disp = np.vstack([disp, cable_x - np.vstack(rest_cables)])
+                point_data = {name: np.vstack([values, np.zeros((len(cable_x), 3))]) for name, values in point_data.items()}
+                point_data["displacement"] = disp
                 cells.append(("line", lines))
                 cell_j.append(np.full(len(lines), np.nan))
             file = frames_dir / f"frame_{f:05d}.vtu"
-            meshio.write(file, meshio.Mesh(points, cells, point_data={"displacement": disp}, cell_data={"J": cell_j}))
+            meshio.write(file, meshio.Mesh(points, cells, point_data=point_data, cell_data={"J": cell_j}))
             entries.append(
                 f'    <DataSet timestep="{float(self.times[f])!r}" group="" part="0" '
                 f"file={quoteattr(f'{name}/{file.name}')}/>"
@@ -319,8 +352,32 @@ class Trajectory:
             "max_kinetic_energy": float(self.kinetic_energy.max()),
             "max_displacement": float(np.linalg.norm(self.displacement[-1], axis=1).max(initial=0.0)),
             "final_actuation": self.actuation[-1].tolist() if self.actuation.size else [],
+            **self._contact_dict(),
             "timings": dict(self.timings),
         }
+
+    def _contact_dict(self) -> dict[str, Any]:
+        """``{"contact": ...}`` (per obstacle: the final and the largest force, the smallest
+        distance over the frames) when the body has obstacles."""
+        if self.obstacle_forces is None or self.min_distances is None or self.active_contacts is None:
+            return {}
+        magnitude = np.linalg.norm(self.obstacle_forces, axis=2)
+        obstacles = []
+        for k, placement in enumerate(self.body.obstacles):
+            distances = self.min_distances[:, k]
+            near = distances[np.isfinite(distances)]
+            obstacles.append({
+                **placement.to_dict(),
+                "final_force": self.obstacle_forces[-1, k].tolist(),
+                "max_force": float(magnitude[:, k].max(initial=0.0)),
+                "min_distance": float(near.min()) if near.size else None,
+                "max_active_contacts": int(self.active_contacts[:, k].max(initial=0)),
+            })
+        finite = self.iterate_min_distances[np.isfinite(self.iterate_min_distances)]
+        return {"contact": {
+            "obstacles": obstacles,
+            "min_iterate_distance": float(finite.min()) if finite.size else None,
+        }}
 
     def __repr__(self) -> str:
         return (
@@ -443,8 +500,9 @@ def simulate(
     try:
         if not bar.active:
             out = run(steps, alphas, x0, v0, save_every)
-        elif _has_free_cable_nodes(body):
-            # Free cable nodes' velocities do not survive a restart: one piece, a moving clock.
+        elif _has_free_cable_nodes(body) or any(o.path is not None for o in body.obstacles):
+            # Free cable nodes' velocities do not survive a restart, and obstacle paths run on
+            # the time of one call: one piece, a moving clock.
             out = run(steps, alphas, x0, v0, save_every)
             bar.set(steps, postfix=_step_postfix(out, steps, dt))
         else:
@@ -499,7 +557,7 @@ def _run_in_chunks(
     only its end, kept if that is a save point. The first chunk is one step; later ones aim at
     :data:`CHUNK_SECONDS` each."""
     joined: dict[str, Any] = {"times": [], "positions": [], "kinetic_energy": [], "cable_points": [],
-                              "iterations": [], "cutbacks": 0, "velocities": None}
+                              "iterations": [], "cutbacks": 0, "velocities": None, "contact": []}
     done, t_offset, size = 0, 0.0, 1
     x, v = x0, v0
     while done < steps:
@@ -528,6 +586,11 @@ def _run_in_chunks(
         joined["positions"].append(positions[keep])
         joined["kinetic_energy"].append(np.asarray(out["kinetic_energy"], dtype=np.float64)[keep])
         joined["cable_points"].extend(list(out.get("cable_points", []))[keep])
+        if out.get("contact") is not None:
+            joined["contact"].append(out["contact"] | {
+                key: np.asarray(out["contact"][key])[keep]
+                for key in ("forces", "obstacle_forces", "translations", "min_distance", "active")
+            })
         joined["iterations"].append(np.asarray(out["iterations"], dtype=np.int64))
         joined["cutbacks"] += int(out.get("cutbacks", 0))
         joined["velocities"] = out["velocities"]
@@ -545,6 +608,11 @@ def _run_in_chunks(
         "cable_points": joined["cable_points"],
         "iterations": np.concatenate(joined["iterations"]),
         "cutbacks": joined["cutbacks"],
+        "contact": None if not joined["contact"] else {
+            key: (np.concatenate([c[key] for c in joined["contact"]]) if key != "iterate_min_distances"
+                  else [d for c in joined["contact"] for d in c[key]])
+            for key in joined["contact"][0]
+        },
     }
 
 

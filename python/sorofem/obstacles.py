@@ -30,7 +30,7 @@ from ._validate import as_finite, describe, positive_scalar
 from .errors import InputError, MeshError
 from .io import read_surface
 
-__all__ = ["Obstacle", "Plane", "Sphere", "Box", "MeshObstacle", "OpenSurfaceWarning"]
+__all__ = ["Obstacle", "Plane", "Sphere", "Box", "MeshObstacle", "OpenSurfaceWarning", "obstacle_surface"]
 
 
 class OpenSurfaceWarning(UserWarning):
@@ -311,9 +311,12 @@ class MeshObstacle(_TriangleObstacle):
         return f"MeshObstacle({self.name}, {len(self.vertices)} vertices, {len(self.triangles)} triangles)"
 
 
-def obstacle_surface(obstacle: Obstacle, extent: float) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-    """Triangles to draw an obstacle with: a plane as a square of side ``2 extent`` (m) around
-    its point, a sphere as a UV sphere, boxes and meshes as they are."""
+def obstacle_surface(
+    obstacle: Obstacle, extent: ArrayLike, around: ArrayLike = (0.0, 0.0, 0.0)
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Triangles to draw an obstacle with: a plane as the rectangle where it crosses the box of
+    half-sizes ``extent`` ``(3,)`` (m) centred on ``around`` (approximately: the projection of
+    the box onto the plane), a sphere as a UV sphere, boxes and meshes as they are."""
     if isinstance(obstacle, _TriangleObstacle):
         return obstacle.vertices, obstacle.triangles
     if isinstance(obstacle, Sphere):
@@ -330,6 +333,10 @@ def obstacle_surface(obstacle: Obstacle, extent: float) -> tuple[NDArray[np.floa
         u = np.cross(obstacle.normal, axis)
         u /= np.linalg.norm(u)
         v = np.cross(obstacle.normal, u)
-        corners = [obstacle.point + extent * (a * u + b * v) for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+        centre = np.asarray(around, dtype=np.float64)
+        centre = centre - obstacle.normal * float(np.dot(centre - obstacle.point, obstacle.normal))
+        half = np.abs(np.asarray(extent, dtype=np.float64))
+        du, dv = float(np.dot(np.abs(u), half)), float(np.dot(np.abs(v), half))
+        corners = [centre + a * du * u + b * dv * v for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
         return np.array(corners), np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int64)
     raise InputError(f"obstacle: expected a sorofem obstacle, got {describe(obstacle)}")

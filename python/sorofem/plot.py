@@ -24,6 +24,7 @@ from numpy.typing import NDArray
 
 from .dynamics import Trajectory
 from .errors import InputError
+from .obstacles import obstacle_surface
 from .solver import SolveReport
 from .static import StaticResult
 
@@ -123,7 +124,8 @@ def plot_rest_and_deformed(
     color_by: str = "displacement",
 ) -> None:
     """Rest shape (grey wireframe) and deformed surface coloured by a field, as a PNG; the
-    body's cables, if any, in red (rest shape dashed).
+    body's cables, if any, in red (rest shape dashed); its obstacles translucent grey, with the
+    contact forces on the nodes as black arrows.
 
     Axes share one scale so shapes are not distorted.
 
@@ -189,6 +191,12 @@ def plot_rest_and_deformed(
 
     both = np.vstack([rest, deformed])
     lo, hi = both.min(axis=0), both.max(axis=0)
+    obstacles = _draw_obstacles(ax, result, lo, hi)
+    if len(obstacles):
+        # Obstacles widen the view, but not by more than half the body's size on each side.
+        margin = 0.5 * (hi - lo)
+        lo = np.minimum(lo, np.maximum(obstacles.min(axis=0), lo - margin))
+        hi = np.maximum(hi, np.minimum(obstacles.max(axis=0), hi + margin))
     span = hi - lo
     # A flat direction would make a zero-height box; give it a sliver of the largest span.
     span = np.maximum(span, 0.02 * float(span.max() or 1.0))
@@ -210,6 +218,35 @@ def plot_rest_and_deformed(
     fig.colorbar(mappable, ax=ax, shrink=0.6, pad=0.1, label=bar_label)
     ax.set_title(title if title is not None else f"rest (grey) and deformed; max |u| = {vmax_u:.3g} m")
     fig.savefig(os.fspath(path))
+
+
+def _draw_obstacles(ax, result: StaticResult, lo: NDArray[np.float64], hi: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Draws the body's obstacles (where they are at t = 0) and the contact forces; returns the
+    drawn obstacle vertices, ``(k, 3)``."""
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    placements = getattr(result.body, "obstacles", ())
+    if not placements:
+        return np.zeros((0, 3))
+    centre, size = 0.5 * (lo + hi), float(np.linalg.norm(hi - lo))
+    drawn = []
+    for placement in placements:
+        vertices, triangles = obstacle_surface(placement.obstacle, 0.6 * (hi - lo), centre)
+        if placement.path is not None:
+            vertices = vertices + [np.interp(0.0, placement.path[:, 0], placement.path[:, k]) for k in (1, 2, 3)]
+        ax.add_collection3d(Poly3DCollection(vertices[triangles], facecolors=(0.55, 0.55, 0.6, 0.25),
+                                             edgecolors=(0.3, 0.3, 0.35, 0.3), linewidths=0.3))
+        drawn.append(vertices)
+    forces = result.contact_forces
+    magnitude = np.linalg.norm(forces, axis=1)
+    loaded = magnitude > 1e-3 * float(magnitude.max(initial=0.0))
+    if loaded.any():
+        scale = 0.15 * size / float(magnitude.max())
+        x = result.positions[loaded]
+        ax.quiver(*x.T, *(scale * forces[loaded]).T, color="black", linewidth=0.8,
+                  label=f"contact forces (max {magnitude.max():.3g} N per node)")
+        ax.legend(loc="upper left")
+    return np.vstack(drawn)
 
 
 def plot_convergence(

@@ -24,6 +24,7 @@ from ..targets import Target
 from ._build import (
     apply_cables,
     apply_fixed,
+    apply_obstacles,
     apply_loads,
     build_control,
     build_dynamics,
@@ -138,7 +139,7 @@ class Scene:
         # Structure, types, ranges and allowed values (everything json_schema() says), with
         # defaults filled in; then what needs the mesh and the other files.
         data = SCENE.check(check, raw, "")
-        for name in ("formulation", "loads", "solver", "output"):
+        for name in ("formulation", "loads", "solver", "output", "contact"):
             if name not in data:
                 data[name] = SCENE.fields[name].spec.check(check, {}, name)
 
@@ -150,9 +151,13 @@ class Scene:
             body = Body(mesh, material, formulation=formulation, **options)
         except ParameterError as exc:
             raise check.error(f"material.{exc.parameter or 'youngs_modulus'}", str(exc)) from None
+        if not data["fixed"] and not data["obstacle"]:
+            raise check.error("fixed", "missing: a scene needs a [[fixed]] entry, or [[obstacle]] entries for an "
+                              "unsupported body to rest on (an unsupported body in empty space has no equilibrium)")
         apply_fixed(check, data["fixed"], body)
         gravity = apply_loads(check, data["loads"], body)
         cables = apply_cables(check, data["cable"], body)
+        obstacle_files = apply_obstacles(check, data["obstacle"], data["contact"], body, path.parent)
         dynamics = build_dynamics(check, data["dynamics"], body) if "dynamics" in data else None
         target, target_files = None, []
         if "target" in data:
@@ -177,7 +182,7 @@ class Scene:
             regions=regions,
             material_region=owner,
             output=output,
-            input_files=[p for p in (path, mesh.source, *target_files) if p is not None],
+            input_files=[p for p in (path, mesh.source, *target_files, *obstacle_files) if p is not None],
         )
 
     @property
@@ -245,6 +250,8 @@ class Scene:
             "fixed_nodes": int(self.body.fixed_nodes.size),
             "solver": self.solve_options.to_dict(),
             "cables": [c.to_dict() for c in self.cables],
+            "obstacles": [o.to_dict() for o in self.body.obstacles],
+            "contact": self.body.contact_settings,
             "dynamics": None if self.dynamics is None else {
                 **self.dynamics,
                 "actuation": None if self.dynamics["actuation"] is None else [
