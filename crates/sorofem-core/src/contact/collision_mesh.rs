@@ -13,8 +13,8 @@ use crate::mesh::TetMesh;
 
 /// One stencil of the contact potential: a pair of primitives that may come within `dhat`.
 /// Vertex ids follow the numbering of [`CollisionMesh`]; `obstacle` indexes
-/// [`CollisionMesh::obstacles`] and must name a plane (`PointPlane`) or a sphere (`PointSphere`),
-/// as the broad phase makes them (the kernels panic otherwise).
+/// [`CollisionMesh::obstacles`] and must name a plane (`PointPlane`) or a sphere (the `...Sphere`
+/// stencils), as the broad phase makes them (the kernels panic otherwise).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Candidate {
     /// A vertex and a triangle (body vertex vs body or obstacle triangle, or obstacle vertex vs
@@ -26,11 +26,22 @@ pub enum Candidate {
     PointPlane { point: usize, obstacle: usize },
     /// A body vertex and the analytic ball `obstacles[obstacle]`.
     PointSphere { point: usize, obstacle: usize },
+    /// A body triangle and the analytic ball `obstacles[obstacle]`: active when the ball's
+    /// centre projects inside the triangle (otherwise an edge or a vertex is closest, and their
+    /// own stencils count it), so that a ball cannot slip between the vertices of a coarse
+    /// surface.
+    TriangleSphere {
+        triangle: [usize; 3],
+        obstacle: usize,
+    },
+    /// A body edge and the analytic ball `obstacles[obstacle]`: active when the centre projects
+    /// inside the edge.
+    EdgeSphere { edge: [usize; 2], obstacle: usize },
 }
 
 impl Candidate {
     /// The stencil's vertex ids (the first `n` entries of the array are used): `[p, t0, t1, t2]`,
-    /// `[a0, a1, b0, b1]`, or `[p]`.
+    /// `[a0, a1, b0, b1]`, `[p]`, `[t0, t1, t2]` or `[e0, e1]`.
     pub fn vertices(&self) -> ([usize; 4], usize) {
         match *self {
             Candidate::PointTriangle { point, triangle: t } => ([point, t[0], t[1], t[2]], 4),
@@ -38,6 +49,8 @@ impl Candidate {
             Candidate::PointPlane { point, .. } | Candidate::PointSphere { point, .. } => {
                 ([point, 0, 0, 0], 1)
             }
+            Candidate::TriangleSphere { triangle: t, .. } => ([t[0], t[1], t[2], 0], 3),
+            Candidate::EdgeSphere { edge: e, .. } => ([e[0], e[1], 0, 0], 2),
         }
     }
 

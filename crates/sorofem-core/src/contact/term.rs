@@ -11,7 +11,10 @@
 
 use super::barrier::{barrier_gradient, initial_barrier_stiffness, StiffnessBounds};
 use super::broad_phase::{candidates, swept_candidates};
-use super::ccd::{candidate_toi, max_step, point_plane_toi, point_sphere_toi};
+use super::ccd::{
+    candidate_toi, max_step, point_plane_toi, point_sphere_toi, sphere_edge_toi,
+    sphere_triangle_toi,
+};
 use super::check::{check_no_intersection, minimum_distance};
 use super::collision_mesh::{Candidate, CollisionMesh};
 use super::distance::Vec3;
@@ -378,9 +381,10 @@ impl ContactTerm {
     /// The obstacle a stencil belongs to (`None` for self-contact).
     pub fn obstacle_of(&self, candidate: &Candidate) -> Option<usize> {
         match *candidate {
-            Candidate::PointPlane { obstacle, .. } | Candidate::PointSphere { obstacle, .. } => {
-                Some(obstacle)
-            }
+            Candidate::PointPlane { obstacle, .. }
+            | Candidate::PointSphere { obstacle, .. }
+            | Candidate::TriangleSphere { obstacle, .. }
+            | Candidate::EdgeSphere { obstacle, .. } => Some(obstacle),
             Candidate::PointTriangle { .. } | Candidate::EdgeEdge { .. } => {
                 let (ids, n) = candidate.vertices();
                 ids[..n]
@@ -579,12 +583,21 @@ impl ContactTerm {
                 Obstacle::Sphere(sphere) => point_sphere_toi(&x0[*v], &relative, sphere, eta),
                 Obstacle::Mesh(_) => None,
             };
-            let t = self
+            let mut t = self
                 .mesh
                 .body_vertices()
                 .par_iter()
                 .filter_map(toi)
                 .reduce(|| 1.0, f64::min);
+            if let Obstacle::Sphere(sphere) = obstacle {
+                let faces = self.mesh.body_faces().par_iter().filter_map(|f| {
+                    sphere_triangle_toi(sphere, &f.map(|v| x0[v]), &[relative; 3], eta)
+                });
+                let edges = self.mesh.body_edges().par_iter().filter_map(|e| {
+                    sphere_edge_toi(sphere, &e.map(|v| x0[v]), &[relative; 2], eta)
+                });
+                t = t.min(faces.chain(edges).reduce(|| 1.0, f64::min));
+            }
             bound = bound.min(t);
         }
         // Meshes: their vertices move, the body stays.
