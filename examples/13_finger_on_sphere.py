@@ -3,7 +3,7 @@ pressing on it, with physics checks: the contact force against the pull.
 
 The finger of example 10: a closed triangle surface (120 mm long along x, a rounded-square
 cross-section tapering from 12.5 to 7.5 mm half-width, written as a binary STL), filled with
-tetrahedra by ``sf.tetrahedralize`` (fTetWild, the optional extra ``sorofem[mesh]``), silicone
+tetrahedra by ``sf.tetrahedralize`` (fTetWild, the optional extra ``mesh``), silicone
 like Dragon Skin 10 (Neo-Hookean, E = 150 kPa, nu = 0.49, rho = 1070 kg/m^3) in the mixed
 formulation, its base clamped, under gravity (0, 0, -9.81) m/s^2. A cable on its upper side,
 from a motor behind the clamp (a world anchor) to 6 mm short of the tip, 12 segments of
@@ -36,7 +36,7 @@ larger pull steps.
 
 Run::
 
-    pip install 'sorofem[mesh]'
+    pip install ".[mesh]"     # from a checkout of sorofem
     python examples/13_finger_on_sphere.py --out results/finger_on_sphere
 """
 
@@ -229,7 +229,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         import pytetwild  # noqa: F401
     except ImportError:
-        print("error: this example needs the mesher: pip install 'sorofem[mesh]'", file=sys.stderr)
+        print(f"error: this example needs the mesher: {sf.meshing.INSTALL_HINT}", file=sys.stderr)
         return 2
     try:
         summary = run(args.out, quick=args.quick)

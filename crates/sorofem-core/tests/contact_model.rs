@@ -169,7 +169,7 @@ fn sensitivities_through_frictionless_contact_match_finite_differences() {
         ..Default::default()
     };
     // O(e) = (c . x, F_z) at mu + e dmu, g + e dg.
-    let mut solve_at = |model: &mut Model, e: f64| -> (f64, f64) {
+    let solve_at = |model: &mut Model, e: f64| -> (f64, f64) {
         let shifted: Vec<f64> = mus.iter().zip(&dmu).map(|(a, b)| a + e * b).collect();
         model
             .set_material(&Material {
