@@ -438,21 +438,22 @@ class Body:
         return len(self._obstacles) - 1
 
     def set_contact(self, **settings: float | None) -> None:
-        """Change contact settings (``None`` restores a default).
+        """Change contact settings, given as keywords (``None`` restores a default); the
+        settings not given keep their values.
 
-        Parameters
-        ----------
-        dhat
+        Other Parameters
+        ----------------
+        dhat : float or None
             Activation distance of the barrier, m: the body feels an obstacle closer than
             this and rests a fraction of it away. Default: 1 % of the mean boundary edge.
-        stiffness
+        stiffness : float or None
             Reference barrier stiffness, J/m^4. Default: fixed at the first solve from the
             material, so that a node pushed with ``mu h^2`` (shear modulus, mean boundary edge)
             rests at ``dhat / 10``.
-        friction_slip
+        friction_slip : float or None
             Static solves: the slip over a load step below which friction sticks (smoothed), m.
             Default ``dhat / 10``.
-        friction_velocity
+        friction_velocity : float or None
             Dynamics: the sliding speed below which friction sticks (smoothed), m/s. Default
             1e-3 (IPC's).
 
