@@ -123,8 +123,8 @@ fn a_cantilever_sags_onto_a_plane_below_its_tip() {
             balance[k] += r[k];
         }
     }
-    for k in 0..3 {
-        balance[k] += contact.forces.per_obstacle[0][k];
+    for (b, f) in balance.iter_mut().zip(contact.forces.per_obstacle[0]) {
+        *b += f;
     }
     let residual = balance.iter().map(|v| v.abs()).fold(0.0, f64::max);
     assert!(residual <= 1e-8 * weight, "balance {balance:?}");
