@@ -40,6 +40,15 @@ pub enum Candidate {
 }
 
 impl Candidate {
+    /// A hash of a set of stencils, whatever their order: equal for the same stencils.
+    pub fn fingerprint(stencils: impl Iterator<Item = Candidate>) -> u64 {
+        let mut sorted: Vec<Candidate> = stencils.collect();
+        sorted.sort_unstable();
+        let mut hasher = std::collections::hash_map::DefaultHasher::new();
+        std::hash::Hash::hash(&sorted, &mut hasher);
+        std::hash::Hasher::finish(&hasher)
+    }
+
     /// The stencil's vertex ids (the first `n` entries of the array are used): `[p, t0, t1, t2]`,
     /// `[a0, a1, b0, b1]`, `[p]`, `[t0, t1, t2]` or `[e0, e1]`.
     pub fn vertices(&self) -> ([usize; 4], usize) {

@@ -73,6 +73,9 @@ pub struct ContactSetup {
 pub struct ContactPass {
     pub energy: f64,
     pub min_squared_distance: f64,
+    /// Fingerprint of the active stencils (barrier within `dhat`, lagged friction): unchanged,
+    /// a factorisation kept from an earlier pass covers the same contacts.
+    pub active_set: u64,
 }
 
 /// Contact forces at one state. Forces are those the obstacles exert on the body, `-grad` of the
@@ -470,6 +473,7 @@ impl ContactTerm {
             return ContactPass {
                 energy: f64::INFINITY,
                 min_squared_distance: 0.0,
+                active_set: 0,
             };
         };
         let friction = self.friction_stencils(&x, mode);
@@ -498,6 +502,9 @@ impl ContactTerm {
         ContactPass {
             energy,
             min_squared_distance,
+            active_set: Candidate::fingerprint(
+                barrier.iter().chain(&friction).map(|s| s.candidate),
+            ),
         }
     }
 

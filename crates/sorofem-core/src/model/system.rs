@@ -7,7 +7,6 @@ use crate::contact::ccd::DEFAULT_MIN_SEPARATION;
 use crate::energy::pressure_iterates::{PressureIterates, PressureLinearisations};
 use crate::energy::HessianMode;
 use crate::error::Result;
-use crate::linear::LowerPattern;
 use crate::newton::{AuxiliaryIterates, Merit, NewtonOptions, NewtonProblem};
 use crate::report::Timings;
 use std::time::Instant;
@@ -35,6 +34,8 @@ pub(super) struct System<'a> {
     hessian_prepared: bool,
     /// How this solve treats the model's contact, and what it measured (when there is contact).
     pub(super) contact: Option<ContactSolve>,
+    /// Directions from a kept factorisation (dynamics), when set.
+    pub(super) reuse: Option<FactorReuse>,
 }
 
 /// When the friction of a solve is lagged (see [`crate::contact::ContactTerm::lag_friction`]).
@@ -70,9 +71,16 @@ pub(super) struct ContactSolve {
     last_z: Vec<f64>,
     /// Seconds in contact passes (broad phase, stencils, scatter) and in the step bounds.
     pub(super) seconds: f64,
+    /// [`crate::contact::ContactPass::active_set`] at the state last evaluated.
+    active_set: u64,
 }
 
 impl ContactSolve {
+    /// Whether the last accepted iterate has a stencil within `dhat`.
+    pub(super) fn within_dhat(&self) -> bool {
+        self.accepted_min_d2.is_finite()
+    }
+
     pub(super) fn new(friction: FrictionLag, balance_stiffness: bool) -> Self {
         ContactSolve {
             friction,
@@ -84,6 +92,7 @@ impl ContactSolve {
             iterate_min_distances: Vec::new(),
             last_z: Vec::new(),
             seconds: 0.0,
+            active_set: 0,
         }
     }
 }
@@ -96,66 +105,91 @@ impl Drop for System<'_> {
     }
 }
 
-/// The quadratic terms implicit Euler adds to the energy (free DOFs `d`):
-/// `1/2 sum_d inertia_d (u_d - predicted_d)^2 + 1/2 (u - previous)^T D (u - previous)` with
-/// `inertia = m / h^2` and the Rayleigh damping `D = (alpha_M M + beta_K K_n) / h`, `K_n` the
-/// projected (positive semi-definite) displacement Hessian at the start of the step.
+/// What implicit Euler adds to the energy of a step of length `h` (free DOFs `d`, `u` their
+/// values, `u_n` those at the step's start):
+///
+/// ```text
+/// E(z) = 1/2 sum_d inertia_d (u_d - predicted_d)^2 + 1/2 sum_d mass_damping_d (u_d - u_n,d)^2
+///      + internal_scale Pi_int(z) - start_force . (u - u_n)
+/// ```
+///
+/// with `inertia = m / h^2`, `mass_damping = alpha_M m / h`, `internal_scale = 1 + beta_K / h`
+/// and `start_force = beta_K / h F(z_n)` (F the internal force, displacement rows only): its
+/// stationarity is `M (u - u_n - h v_n) / h^2 + alpha_M M (u - u_n) / h + F(z) + beta_K (F(z) -
+/// F(z_n)) / h = f`. The Rayleigh stiffness damping is `beta_K` times the rate of the internal
+/// force over the step, which is `beta_K K(u) v` as h -> 0 (docs/theory.md, "Dynamics").
 pub(super) struct StepTerms {
     pub(super) inertia: Vec<f64>,
     pub(super) predicted: Vec<f64>,
     pub(super) previous: Vec<f64>,
     pub(super) mass_damping: Vec<f64>,
-    /// `beta_K / h K_n` in the Hessian's lower-triangle layout (empty without stiffness damping).
-    pub(super) stiffness_damping: Vec<f64>,
+    pub(super) internal_scale: f64,
+    /// `beta_K / h F(z_n)` on the free DOFs (empty without stiffness damping).
+    pub(super) start_force: Vec<f64>,
     pub(super) diagonal: Vec<usize>,
 }
 
 impl StepTerms {
-    fn energy(&self, free: &[f64], pattern: &LowerPattern) -> f64 {
+    fn energy(&self, free: &[f64]) -> f64 {
         let mut e = 0.0;
         for d in 0..free.len() {
             let a = free[d] - self.predicted[d];
             let b = free[d] - self.previous[d];
             e += 0.5 * (self.inertia[d] * a * a + self.mass_damping[d] * b * b);
         }
-        if !self.stiffness_damping.is_empty() {
-            let delta: Vec<f64> = free
-                .iter()
-                .zip(&self.previous)
-                .map(|(x, y)| x - y)
-                .collect();
-            let kd = pattern.symmetric_matvec(&self.stiffness_damping, &delta);
-            e += 0.5 * kd.iter().zip(&delta).map(|(a, b)| a * b).sum::<f64>();
+        for ((f, x), y) in self.start_force.iter().zip(free).zip(&self.previous) {
+            e -= f * (x - y);
         }
         e
     }
 
-    fn add_gradient(&self, free: &[f64], pattern: &LowerPattern, g: &mut [f64]) {
+    fn add_gradient(&self, free: &[f64], g: &mut [f64]) {
         for d in 0..free.len() {
             g[d] += self.inertia[d] * (free[d] - self.predicted[d])
                 + self.mass_damping[d] * (free[d] - self.previous[d]);
         }
-        if !self.stiffness_damping.is_empty() {
-            let delta: Vec<f64> = free
-                .iter()
-                .zip(&self.previous)
-                .map(|(x, y)| x - y)
-                .collect();
-            for (gi, kd) in g
-                .iter_mut()
-                .zip(pattern.symmetric_matvec(&self.stiffness_damping, &delta))
-            {
-                *gi += kd;
-            }
+        for (gi, f) in g.iter_mut().zip(&self.start_force) {
+            *gi -= f;
         }
     }
 
+    /// Adds the inertia and mass damping to the Hessian's values (the internal terms' already
+    /// scaled by `internal_scale`, see `System::scale_internal`).
     fn add_hessian(&self, hessian: &mut [f64]) {
         for (d, &p) in self.diagonal.iter().enumerate() {
             hessian[p] += self.inertia[d] + self.mass_damping[d];
         }
-        for (h, k) in hessian.iter_mut().zip(&self.stiffness_damping) {
-            *h += k;
+    }
+}
+
+/// Modified Newton for a sequence of solves (the steps of a simulation): directions
+/// `d = -H_kept^{-1} g` from a factorisation kept across iterations and solves, until the
+/// residual falls by less than `max_ratio` in an iteration (or the kept factor gives no
+/// descent direction, or the active contacts changed); the next direction then factorises the
+/// Hessian at its iterate.
+#[derive(Clone, Debug)]
+pub(crate) struct FactorReuse {
+    /// The model factor's [`crate::linear::SparseFactor::generation`] when it was kept.
+    pub(crate) kept: Option<u64>,
+    /// The active contacts the kept factorisation holds ([`crate::contact::ContactPass::active_set`];
+    /// 0 without contact): a stencil that became active since has no curvature in it, and its
+    /// direction would run into the obstacle up to the collision bound.
+    pub(crate) contact_set: u64,
+    /// The residual norm at the last direction of the current solve.
+    pub(crate) last_norm: Option<f64>,
+    pub(crate) max_ratio: f64,
+    /// Directions computed with the kept factorisation.
+    pub(crate) reused: usize,
+}
+
+impl FactorReuse {
+    pub(crate) fn new(max_ratio: f64) -> Self {
+        FactorReuse {
+            kept: None,
+            contact_set: 0,
+            last_norm: None,
+            max_ratio,
+            reused: 0,
         }
     }
 }
@@ -183,6 +217,7 @@ impl<'a> System<'a> {
             pressure_base: Vec::new(),
             hessian_prepared: false,
             contact: None,
+            reuse: None,
         }
     }
 }
@@ -229,6 +264,7 @@ impl System<'_> {
         });
         let pass = term.add_to(&self.model.assembler, z, gradient, hessian);
         solve.last_min_d2 = pass.min_squared_distance;
+        solve.active_set = pass.active_set;
         if term.audit() {
             solve.last_z = z.to_vec();
         }
@@ -244,13 +280,34 @@ impl System<'_> {
             .assembler
             .evaluate(&self.model.terms.internal(), z, true, None);
         let mut g = eval.gradient;
+        let mut energy = eval.energy;
+        self.scale_internal(&mut energy, &mut g, None);
         for (gi, &d) in g.iter_mut().zip(self.model.assembler.full_of_free()) {
             *gi -= self.load[d];
         }
         if let Some(step) = &self.step {
-            step.add_gradient(&self.free_values(z), self.model.assembler.pattern(), &mut g);
+            step.add_gradient(&self.free_values(z), &mut g);
         }
         g
+    }
+
+    /// Scales the internal terms' energy, gradient and Hessian values by the step's
+    /// `internal_scale` (`1 + beta_K / h`, see [`StepTerms`]). Contact is added after: Rayleigh
+    /// damping is the body's, and the barrier's forces stay the contact forces.
+    fn scale_internal(&self, energy: &mut f64, gradient: &mut [f64], hessian: Option<&mut [f64]>) {
+        let scale = self.step.as_ref().map_or(1.0, |step| step.internal_scale);
+        if scale != 1.0 {
+            *energy *= scale;
+            gradient.iter_mut().for_each(|v| *v *= scale);
+            if let Some(hessian) = hessian {
+                hessian.iter_mut().for_each(|v| *v *= scale);
+            }
+        }
+    }
+
+    /// The active contacts at the state last evaluated (0 without contact).
+    fn active_contacts(&self) -> u64 {
+        self.contact.as_ref().map_or(0, |c| c.active_set)
     }
 
     fn free_values(&self, z: &[f64]) -> Vec<f64> {
@@ -262,8 +319,66 @@ impl System<'_> {
             .collect()
     }
 
+    /// `-H^{-1} g` with the model's stored factorisation (in the mixed formulation `g`'s
+    /// pressure rows carry the pressure weight, which the solve takes back out).
+    fn solve_with_factor(&self, g: &[f64], timings: &mut Timings) -> Vec<f64> {
+        let t0 = Instant::now();
+        let mut d: Vec<f64> = g.iter().map(|v| -v).collect();
+        if self.is_mixed() {
+            let n = self.n_nodes();
+            let len = d.len();
+            d[len - n..]
+                .iter_mut()
+                .for_each(|v| *v /= self.model.pressure_weight);
+        }
+        self.model.factor.solve_in_place(&mut d);
+        timings.solve += t0.elapsed().as_secs_f64();
+        d
+    }
+
+    /// Whether `d` may serve as a direction for gradient `g`: a descent direction of the energy
+    /// (standard formulation). No inertia test for the mixed formulation: the condensed
+    /// curvature `du^T A du + dp^T C dp` cancels catastrophically when the pressure (and so
+    /// `K_geo(p)`) is large; finite values only.
+    fn is_usable(&self, d: &[f64], g: &[f64]) -> bool {
+        if self.is_mixed() {
+            d.iter().all(|v| v.is_finite())
+        } else {
+            d.iter().zip(g).map(|(a, b)| a * b).sum::<f64>() < 0.0
+        }
+    }
+
+    /// A direction from the kept factorisation of [`FactorReuse`], when there is one, the
+    /// residual fell enough since the last direction and it gives a usable direction.
+    fn kept_direction(
+        &mut self,
+        g: &[f64],
+        g_norm: f64,
+        timings: &mut Timings,
+    ) -> Option<Vec<f64>> {
+        let reuse = self.reuse.as_ref()?;
+        let slow = reuse
+            .last_norm
+            .is_some_and(|last| g_norm > reuse.max_ratio * last);
+        if slow
+            || reuse.kept != Some(self.model.factor.generation())
+            || reuse.contact_set != self.active_contacts()
+        {
+            return None;
+        }
+        let d = self.solve_with_factor(g, timings);
+        let usable = self.is_usable(&d, g);
+        let reuse = self.reuse.as_mut().expect("checked above");
+        if !usable {
+            return None;
+        }
+        reuse.last_norm = Some(g_norm);
+        reuse.reused += 1;
+        Some(d)
+    }
+
     /// The merit (see [`NewtonProblem::merit_and_gradient`]) from the terms' energy and
-    /// gradient at `z`.
+    /// gradient at `z` (internal terms scaled, contact added).
     fn merit_at(&self, z: &[f64], energy: f64, gradient: Vec<f64>) -> (f64, Vec<f64>) {
         if !energy.is_finite() {
             return (f64::INFINITY, vec![f64::INFINITY; gradient.len()]);
@@ -274,7 +389,7 @@ impl System<'_> {
         }
         let free_values = self.step.as_ref().map(|_| self.free_values(z));
         if let (Some(step), Some(free)) = (&self.step, &free_values) {
-            step.add_gradient(free, self.model.assembler.pattern(), &mut g);
+            step.add_gradient(free, &mut g);
         }
         if self.is_mixed() {
             let n = self.n_nodes();
@@ -290,7 +405,7 @@ impl System<'_> {
         let external: f64 = self.load.iter().zip(z.iter()).map(|(f, x)| f * x).sum();
         let mut energy = energy - external;
         if let (Some(step), Some(free)) = (&self.step, &free_values) {
-            energy += step.energy(free, self.model.assembler.pattern());
+            energy += step.energy(free);
         }
         (energy, g)
     }
@@ -347,6 +462,7 @@ impl NewtonProblem for System<'_> {
             .assembler
             .evaluate(&self.model.terms.internal(), z, true, None);
         if eval.energy.is_finite() {
+            self.scale_internal(&mut eval.energy, &mut eval.gradient, None);
             eval.energy += self.add_contact(z, &mut eval.gradient, None);
         }
         self.merit_at(z, eval.energy, eval.gradient)
@@ -363,6 +479,7 @@ impl NewtonProblem for System<'_> {
         );
         if eval.energy.is_finite() {
             let mut gradient = std::mem::take(&mut eval.gradient);
+            self.scale_internal(&mut eval.energy, &mut gradient, Some(&mut eval.hessian));
             eval.energy += self.add_contact(
                 z,
                 &mut gradient,
@@ -383,6 +500,12 @@ impl NewtonProblem for System<'_> {
         projected: bool,
         timings: &mut Timings,
     ) -> Result<Option<Vec<f64>>> {
+        let g_norm = g.iter().map(|v| v * v).sum::<f64>().sqrt();
+        if !projected {
+            if let Some(d) = self.kept_direction(g, g_norm, timings) {
+                return Ok(Some(d));
+            }
+        }
         let mode = if projected {
             HessianMode::Projected
         } else {
@@ -400,6 +523,7 @@ impl NewtonProblem for System<'_> {
             );
             self.take_recorded_linearisation();
             let mut hessian = std::mem::take(&mut eval.hessian);
+            self.scale_internal(&mut 0.0, &mut [], Some(&mut hessian));
             self.add_contact(z, &mut [], Some((&mut hessian, mode)));
             eval.hessian = hessian;
         }
@@ -411,38 +535,30 @@ impl NewtonProblem for System<'_> {
         let pattern = self.model.assembler.pattern();
         let t0 = Instant::now();
         let ok = self.model.factor.factor(pattern, &eval.hessian);
+        let contact_set = self.active_contacts();
         let seconds = t0.elapsed().as_secs_f64();
         self.model.hessian_scratch = eval;
         let ok = ok?;
         timings.factorization += seconds;
         timings.factorizations += 1;
+        if let Some(reuse) = &mut self.reuse {
+            reuse.kept = ok.then(|| self.model.factor.generation());
+            reuse.contact_set = contact_set;
+            reuse.last_norm = Some(g_norm);
+        }
         if !ok {
             timings.failed_factorization += seconds;
             timings.failed_factorizations += 1;
             return Ok(None);
         }
-        let t0 = Instant::now();
-        let mut d: Vec<f64> = g.iter().map(|v| -v).collect();
-        if self.is_mixed() {
-            let n = self.n_nodes();
-            let len = d.len();
-            d[len - n..]
-                .iter_mut()
-                .for_each(|v| *v /= self.model.pressure_weight);
-        }
-        self.model.factor.solve_in_place(&mut d);
-        timings.solve += t0.elapsed().as_secs_f64();
-        // No inertia test for the mixed formulation: the condensed curvature
-        // du^T A du + dp^T C dp cancels catastrophically when the pressure (and so K_geo(p)) is
-        // large.
-        let usable = if self.is_mixed() {
-            d.iter().all(|v| v.is_finite())
-        } else {
-            d.iter().zip(g).map(|(a, b)| a * b).sum::<f64>() < 0.0
-        };
+        let d = self.solve_with_factor(g, timings);
+        let usable = self.is_usable(&d, g);
         if !usable {
             timings.failed_factorization += seconds;
             timings.failed_factorizations += 1;
+            if let Some(reuse) = &mut self.reuse {
+                reuse.kept = None;
+            }
         }
         Ok(usable.then_some(d))
     }
@@ -483,6 +599,10 @@ impl NewtonProblem for System<'_> {
             solve.seconds += t0.elapsed().as_secs_f64();
         }
         bound
+    }
+
+    fn reuses_factorizations(&self) -> bool {
+        self.reuse.is_some()
     }
 
     fn auxiliary(&mut self) -> Option<&mut dyn AuxiliaryIterates> {
