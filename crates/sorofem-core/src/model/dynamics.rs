@@ -553,6 +553,7 @@ impl Model {
                 match once {
                     Ok(first)
                         if !first.converged
+                            && problem.contact.is_some()
                             && (near || first.step_lengths.first().is_some_and(|&t| t < 1.0)) =>
                     {
                         newton::solve(&mut problem, &mut trial, &setup.newton)
