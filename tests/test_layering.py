@@ -31,7 +31,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("fitting.fit",),
     ("fitting.cli",),
     ("fitting",),
-    ("cables",),
+    ("cables", "obstacles"),
     ("body",),
     ("static",),
     ("dynamics",),

@@ -1,6 +1,7 @@
 //! Static equilibria: loads in, positions, pressures, reactions and cable states out.
 
-use super::system::System;
+use super::contact::ContactReport;
+use super::system::{ContactSolve, FrictionLag, System};
 use super::Model;
 use crate::cables::CableSlot;
 use crate::energy::{HessianMode, Term};
@@ -19,11 +20,16 @@ pub struct Loads {
     pub prescribed: Vec<[f64; 3]>,
 }
 
+/// Times a static solve with friction lags it again at its equilibrium and solves once more (each
+/// new solve starting there), until a solve needs no iteration: quasi-static friction whose
+/// normal forces and directions are those of the equilibrium, not of the load step's start.
+const MAX_FRICTION_LAGS: usize = 4;
+
 /// An equilibrium: positions (m, 3 n node-major), nodal pressures (Pa, mixed only), the
 /// reaction force (N) at each fixed node (in the order they were given), the position (m) of
 /// every cable point and the tension (N) of every cable segment (a tendon's is the same on every
-/// segment), each tendon's tension (N) and pull `L0 - L` (m) (`None` for spring cables), and the
-/// report.
+/// segment), each tendon's tension (N) and pull `L0 - L` (m) (`None` for spring cables), the
+/// contact (with obstacles) and the report.
 #[derive(Clone, Debug)]
 pub struct Solution {
     pub positions: Vec<f64>,
@@ -33,6 +39,7 @@ pub struct Solution {
     pub cable_tensions: Vec<Vec<f64>>,
     pub tendon_tensions: Vec<Option<f64>>,
     pub tendon_pulls: Vec<Option<f64>>,
+    pub contact: Option<ContactReport>,
     pub report: SolveReport,
 }
 
@@ -40,6 +47,10 @@ impl Model {
     /// Static equilibrium under `loads`, starting from `initial` positions (3 n, m) or the rest shape.
     /// Internally the unknowns are displacements from the rest shape. In the mixed formulation a
     /// warm start (`initial` given) also starts from the pressures of the previous solve.
+    ///
+    /// With obstacles (held where their paths start), every accepted iterate is apart from
+    /// them, and friction is lagged at each load step's start, then again at the equilibrium
+    /// (slip measured from the load step's start), up to four times.
     pub fn solve(
         &mut self,
         loads: &Loads,
@@ -50,18 +61,30 @@ impl Model {
         self.check_loads(loads)?;
         let n = self.mesh.n_nodes();
         let mut z = self.start_state("initial", initial)?;
+        if let Some(contact) = &mut self.terms.contact {
+            contact.set_time(0.0);
+            contact.clear_friction();
+        }
+        if initial.is_some() {
+            self.check_apart("initial", &z)?;
+        }
+        self.prepare_contact();
         let full_load = self.load_vector(loads);
         let prescribed = self.prescribed(loads);
         let mut problem = System::new(self, full_load, prescribed, None, options);
         problem.extend_state(&mut z, initial.is_some());
         let start_tensions = z[problem.constraints.offset..].to_vec();
+        if problem.model.terms.contact.is_some() {
+            let lag = FrictionLag::LoadStep { origin: None };
+            problem.contact = Some(ContactSolve::new(lag, false));
+        }
         // Only the prescribed displacements are scaled by the load factor: the initial guess is
         // kept as given for the free DOFs, which is what warm starts need.
         // The Newton loop runs on a worker of the thread pool: from the calling thread, its
         // single-threaded factorisations let the workers fall asleep and the element passes
         // after them ran slower (docs/theory.md, "Newton's method").
-        let outcome = rayon::scope(|_| newton::solve(&mut problem, &mut z, options));
-        let report = match outcome {
+        let outcome = solve_with_friction_lags(&mut problem, &mut z, options);
+        let mut report = match outcome {
             Ok(report) => report,
             Err(error) => {
                 let error = infeasible_pulls(error, &problem.tendon_states(&z));
@@ -71,10 +94,24 @@ impl Model {
         };
         problem.finish_state(&mut z, true, &start_tensions);
         let full_load = std::mem::take(&mut problem.full_load);
+        let contact_solve = problem.contact.take();
         drop(problem);
-        // Reaction = internal force minus applied load at the supports, so that the reactions
-        // balance the loads: sum(reactions) + sum(loads) = 0 at equilibrium.
-        let internal = self.assembler.full_gradient(&self.terms.internal(), &z);
+        let iterate_min_distances = match contact_solve {
+            Some(solve) => {
+                report.timings.contact = solve.seconds;
+                solve.iterate_min_distances
+            }
+            None => Vec::new(),
+        };
+        // Reaction = internal force (contact included) minus applied load at the supports, so
+        // that the reactions balance the loads and the contact forces: sum(reactions) +
+        // sum(loads) + sum(contact forces) = 0 at equilibrium (with cable anchors' forces).
+        let mut internal = self.assembler.full_gradient(&self.terms.internal(), &z);
+        if let Some(contact) = &self.terms.contact {
+            for (i, g) in contact.full_gradient(&z).into_iter().enumerate() {
+                internal[i] += g;
+            }
+        }
         let reactions = self
             .fixed_nodes
             .iter()
@@ -88,6 +125,7 @@ impl Model {
             .map(|offset| z[offset..].to_vec());
         self.last_extra = Some(z[self.layout.extra()].to_vec());
         let (cable_points, cable_tensions, tendon_tensions, tendon_pulls) = self.cable_states(&z);
+        let contact = self.contact_report(&z, iterate_min_distances);
         z.truncate(3 * n);
         for (zi, ri) in z.iter_mut().zip(self.mesh.rest_flat()) {
             *zi += ri;
@@ -100,6 +138,7 @@ impl Model {
             cable_tensions,
             tendon_tensions,
             tendon_pulls,
+            contact,
             report,
         })
     }
@@ -329,4 +368,62 @@ pub(super) fn infeasible_pulls(error: Error, tendons: &[(usize, f64, f64, f64)])
         ),
         report,
     }
+}
+
+/// Newton on the extended state `z`; with friction, solved again from each equilibrium
+/// (see [`MAX_FRICTION_LAGS`]) and the records joined.
+fn solve_with_friction_lags(
+    problem: &mut System,
+    z: &mut Vec<f64>,
+    options: &NewtonOptions,
+) -> Result<SolveReport> {
+    let mut report = rayon::scope(|_| newton::solve(problem, z, options))?;
+    if problem
+        .model
+        .terms
+        .contact
+        .as_ref()
+        .is_some_and(|c| c.has_friction())
+    {
+        let solve = problem.contact.as_mut().expect("contact");
+        let origin = solve.load_step_start.clone();
+        solve.friction = FrictionLag::LoadStep {
+            origin: Some(origin),
+        };
+        let again_options = NewtonOptions {
+            load_steps: 1,
+            ..options.clone()
+        };
+        for _ in 0..MAX_FRICTION_LAGS {
+            let again = rayon::scope(|_| newton::solve(problem, z, &again_options))?;
+            let done = again.iterations == 0;
+            absorb(&mut report, again);
+            if done {
+                break;
+            }
+        }
+    }
+    Ok(report)
+}
+
+/// Appends the record of a further solve from where `report`'s ended (a friction lag).
+fn absorb(report: &mut SolveReport, more: SolveReport) {
+    report.iterations += more.iterations;
+    report.residual_history.extend(more.residual_history);
+    report.energy_history.extend(more.energy_history);
+    report.step_lengths.extend(more.step_lengths);
+    report.projected_steps += more.projected_steps;
+    report.residual_norm = more.residual_norm;
+    report.reference_norm = more.reference_norm;
+    let (t, m) = (&mut report.timings, more.timings);
+    t.assembly += m.assembly;
+    t.factorization += m.factorization;
+    t.failed_factorization += m.failed_factorization;
+    t.solve += m.solve;
+    t.line_search += m.line_search;
+    t.step_bound += m.step_bound;
+    t.total += m.total;
+    t.factorizations += m.factorizations;
+    t.failed_factorizations += m.failed_factorizations;
+    report.message = format!("converged in {} Newton iterations", report.iterations);
 }
