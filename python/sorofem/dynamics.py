@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import numbers
 import os
-import re
 import time
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
@@ -39,6 +38,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._chunks import Joined, shift_step_in_message
 from ._deprecated import moved
 from ._files import write_text
 from ._formats import meshio_write
@@ -657,7 +657,7 @@ def simulate(
         )
 
     bar = Progress(total=steps, desc="simulate", unit="steps", enabled=progress)
-    joined = _Joined()
+    joined = Joined()
     try:
         if (not (bar.active or on_frames is not None) or _has_free_cable_nodes(body)
                 or any(o.path is not None for o in body.obstacles)):
@@ -709,52 +709,11 @@ def _postfix(t: float, per_step: float, cutbacks: int) -> str:
 
 #: Wall-clock target of one chunk of steps while a progress line is shown, s.
 CHUNK_SECONDS = 0.2
-_STEP_IN_MESSAGE = re.compile(r"time step (\d+) \(t = ([0-9.eE+-]+) s\)")
-
-
-class _Joined:
-    """The outputs of the chunks integrated so far, joined as one call would return them."""
-
-    def __init__(self) -> None:
-        self.times: list[NDArray[np.float64]] = []
-        self.positions: list[NDArray[np.float64]] = []
-        self.kinetic_energy: list[NDArray[np.float64]] = []
-        self.cable_points: list[Any] = []
-        self.tendon_tensions: list[list[float | None]] = []
-        self.tendon_pulls: list[list[float | None]] = []
-        self.iterations: list[NDArray[np.int64]] = []
-        self.factorizations: list[NDArray[np.int64]] = []
-        self.residuals: list[NDArray[np.float64]] = []
-        self.contact: list[dict[str, Any]] = []
-        self.cutbacks = 0
-        self.velocities: Any = None
-        #: Steps integrated.
-        self.done = 0
-
-    def output(self) -> dict[str, Any]:
-        return {
-            "times": np.concatenate(self.times),
-            "positions": np.concatenate(self.positions),
-            "velocities": self.velocities,
-            "kinetic_energy": np.concatenate(self.kinetic_energy),
-            "cable_points": self.cable_points,
-            "tendon_tensions": self.tendon_tensions,
-            "tendon_pulls": self.tendon_pulls,
-            "iterations": np.concatenate(self.iterations),
-            "factorizations": np.concatenate(self.factorizations),
-            "residuals": np.concatenate(self.residuals),
-            "cutbacks": self.cutbacks,
-            "contact": None if not self.contact else {
-                key: (np.concatenate([c[key] for c in self.contact]) if key != "iterate_min_distances"
-                      else [d for c in self.contact for d in c[key]])
-                for key in self.contact[0]
-            },
-        }
 
 
 def _run_in_chunks(
     run: Callable[..., dict[str, Any]], steps: int, save_every: int, alphas: NDArray[np.float64],
-    x0: Any, v0: Any, dt: float, bar: Progress, joined: _Joined,
+    x0: Any, v0: Any, dt: float, bar: Progress, joined: Joined,
     on_frames: Callable[..., None] | None = None,
 ) -> dict[str, Any]:
     """Integrate ``steps`` steps as consecutive calls of ``run`` (each continuing from the
@@ -784,7 +743,7 @@ def _run_in_chunks(
         try:
             out = run(n, alphas[done:end], x, v, every)
         except ConvergenceError as err:
-            _shift_step_in_message(err, done, t_offset)
+            shift_step_in_message(err, done, t_offset)
             raise
         check_finite_solution(out, None, "the time integration")
         per_step = (time.perf_counter() - tick) / n
@@ -820,18 +779,6 @@ def _run_in_chunks(
         bar.set(end, postfix=_postfix(t_offset, float(iterations.mean()), joined.cutbacks))
         size = max(1, int(CHUNK_SECONDS / max(per_step, 1e-9)))
     return joined.output()
-
-
-def _shift_step_in_message(err: ConvergenceError, first_step: int, t_offset: float) -> None:
-    """A chunk's error counts steps and time from the chunk's start: make them global."""
-
-    def shift(match: re.Match[str]) -> str:
-        return f"time step {int(match[1]) + first_step} (t = {float(match[2]) + t_offset:.4f} s)"
-
-    if err.args and isinstance(err.args[0], str):
-        err.args = (_STEP_IN_MESSAGE.sub(shift, err.args[0]), *err.args[1:])
-    if isinstance(err.report, dict) and isinstance(err.report.get("message"), str):
-        err.report["message"] = _STEP_IN_MESSAGE.sub(shift, err.report["message"])
 
 
 def _has_dynamics() -> bool:
