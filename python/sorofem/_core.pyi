@@ -102,6 +102,21 @@ class Model:
     def set_material(self, mu: _F, lam: _F, rho: _F) -> None:
         """Per-element shear modulus, Lame lambda (Pa) and density (kg/m^3), each (m,).
         Raises ParameterError for mu <= 0, lam < 0 (lam <= 0 when mixed) or rho < 0."""
+    def set_material_model(
+        self,
+        model: str,
+        params: dict[str, _F],
+        density: _F,
+        options: dict[str, Any] | None = None,
+    ) -> None:
+        """Any material model by name ("neo_hookean", "mooney_rivlin", "yeoh", "ogden"), its
+        parameters by name (each (m,), every name of `material_param_names` once), density (m,)
+        kg/m^3 and the model's options ("neo_hookean": "volumetric" "log" | "linear", default the
+        constructor's; "ogden": "terms" 1 to 3). Raises ParameterError naming the parameter and
+        the tet."""
+    @property
+    def material_param_names(self) -> list[str]:
+        """The material's parameter names, in storage order."""
     def solve(
         self,
         gravity: _F,

@@ -259,3 +259,89 @@ pub fn param_direction(
     }
     Ok(delta)
 }
+
+/// A material model by name, with its options: "neo_hookean" takes "volumetric" ("log" |
+/// "linear"; default `volumetric_default`, the model's constructor option), "ogden" takes
+/// "terms" (1 to 3, required), "mooney_rivlin" and "yeoh" take none. Unknown option keys are
+/// errors.
+pub fn material_model(
+    name: &str,
+    options: Option<&Bound<'_, pyo3::types::PyDict>>,
+    volumetric_default: sorofem_core::material::Volumetric,
+) -> Result<sorofem_core::material::MaterialModel, Error> {
+    use pyo3::types::PyDictMethods;
+    use sorofem_core::material::{MaterialModel, Volumetric};
+    let known: &[&str] = match name {
+        "neo_hookean" => &["volumetric"],
+        "ogden" => &["terms"],
+        "mooney_rivlin" | "yeoh" => &[],
+        other => {
+            return Err(Error::invalid(
+                "model",
+                "\"neo_hookean\", \"mooney_rivlin\", \"yeoh\" or \"ogden\"",
+                format!("{other:?}"),
+            ))
+        }
+    };
+    let mut given = std::collections::HashMap::new();
+    if let Some(options) = options {
+        for (key, value) in options.iter() {
+            let key = key.to_string();
+            if !known.contains(&key.as_str()) {
+                return Err(Error::invalid(
+                    "options",
+                    format!("options of the {name:?} model among {known:?}"),
+                    format!("{key:?}"),
+                ));
+            }
+            given.insert(key, value);
+        }
+    }
+    Ok(match name {
+        "neo_hookean" => MaterialModel::NeoHookean {
+            volumetric: match given.get("volumetric") {
+                None => volumetric_default,
+                Some(v) => match v.extract::<String>().as_deref() {
+                    Ok("log") => Volumetric::Log,
+                    Ok("linear") => Volumetric::Linear,
+                    _ => {
+                        return Err(Error::invalid(
+                            "volumetric",
+                            "\"log\" (c = ln J) or \"linear\" (c = J - 1)",
+                            describe(v),
+                        ))
+                    }
+                },
+            },
+        },
+        "mooney_rivlin" => MaterialModel::MooneyRivlin,
+        "yeoh" => MaterialModel::Yeoh,
+        _ => {
+            let terms = given
+                .get("terms")
+                .ok_or_else(|| Error::invalid("terms", "1, 2 or 3 Ogden terms", "none"))?;
+            let terms: usize = terms
+                .extract()
+                .map_err(|_| Error::invalid("terms", "1, 2 or 3 Ogden terms", describe(terms)))?;
+            MaterialModel::ogden(terms)?
+        }
+    })
+}
+
+/// Material parameters from a dict of per-tet arrays (`(m,)` float64 each), by name.
+pub fn material_params(
+    params: &Bound<'_, pyo3::types::PyDict>,
+    n_tets: usize,
+) -> Result<Vec<(String, Vec<f64>)>, Error> {
+    use pyo3::types::PyDictMethods;
+    params
+        .iter()
+        .map(|(key, value)| {
+            let name: String = key
+                .extract()
+                .map_err(|_| Error::invalid("params", "string keys", key.to_string()))?;
+            let values = vector(&format!("params[{name:?}]"), &value, Some(n_tets))?;
+            Ok((name, values))
+        })
+        .collect()
+}

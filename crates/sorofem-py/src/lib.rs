@@ -294,6 +294,34 @@ impl Model {
         py.detach(|| inner.set_material(&material)).py(py)
     }
 
+    /// Sets the material model by name ("neo_hookean", "mooney_rivlin", "yeoh", "ogden"), its
+    /// parameters as a dict of per-tet arrays by name (see `material_param_names`), the density
+    /// (m,) kg/m^3, and the model's options ("neo_hookean": "volumetric", default the
+    /// constructor's; "ogden": "terms").
+    #[pyo3(signature = (model, params, density, options = None))]
+    fn set_material_model(
+        &mut self,
+        py: Python<'_>,
+        model: &str,
+        params: &Bound<'_, PyDict>,
+        density: &Bound<'_, PyAny>,
+        options: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<()> {
+        let m = self.inner.mesh().n_tets();
+        let model = convert::material_model(model, options, self.inner.volumetric()).py(py)?;
+        let params = convert::material_params(params, m).py(py)?;
+        let density = convert::vector("density", density, Some(m)).py(py)?;
+        let inner = &mut self.inner;
+        py.detach(|| inner.set_material_model(model, &params, &density))
+            .py(py)
+    }
+
+    /// The material's parameter names, in storage order.
+    #[getter]
+    fn material_param_names(&self) -> Vec<String> {
+        self.inner.material_param_names()
+    }
+
     /// Static equilibrium; returns a dict with "positions", "pressure", "reactions" (one row per
     /// fixed node, N), "cable_points" (per cable (k, 3), m), "cable_tensions" (per cable (k-1,),
     /// N) and the report entries.
