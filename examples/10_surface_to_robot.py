@@ -3,7 +3,7 @@
 Many soft robots exist only as the closed triangle surface of their mould cavity. This example
 makes such a surface itself, a tapered silicone finger, writes it as a binary STL with meshio,
 fills it with tetrahedra through ``sf.tetrahedralize`` (fTetWild, the optional extra:
-``pip install 'sorofem[mesh]'``), clamps its base and pulls a cable threaded through it.
+``pip install ".[mesh]"`` from a checkout), clamps its base and pulls a cable threaded through it.
 
 The finger: 120 mm long along x, its cross-section a rounded square (the superellipse
 ``|y/a|^4 + |z/a|^4 = 1`` sampled at 24 points) whose half-width ``a`` tapers linearly from
@@ -57,7 +57,7 @@ instead of 8, 4, 2 mm) and larger continuation steps.
 If the mesher is not installed the script says so and exits with status 2 (the test suite
 skips it). Run::
 
-    pip install 'sorofem[mesh]'
+    pip install ".[mesh]"
     python examples/10_surface_to_robot.py --out results/surface_to_robot [--quick]
 """
 

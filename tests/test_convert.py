@@ -68,7 +68,7 @@ def test_gmsh22_file_with_surface_elements_and_unused_node(tmp_path: Path) -> No
     mesh = sf.Mesh.read(path, scale=0.01)
     assert (mesh.n_nodes, mesh.n_tets) == (5, 2)
     np.testing.assert_allclose(mesh.volumes.sum(), (1 / 6 + 1 / 3) * 1e-6)
-    assert mesh.bounds()[1].tolist() == [0.01, 0.01, 0.01]
+    assert mesh.bounds[1].tolist() == [0.01, 0.01, 0.01]
 
 
 def test_tetgen_one_based_with_markers(tmp_path: Path) -> None:

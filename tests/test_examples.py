@@ -6,12 +6,14 @@ from __future__ import annotations
 import importlib.util
 import inspect
 import json
+import tomllib
 from pathlib import Path
 from types import ModuleType
 
 import numpy as np
 import pytest
 
+import sorofem as sf
 from sorofem.cli import main
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
@@ -94,12 +96,39 @@ def test_cantilever_example_numbers(cantilever_summary):
 
 @pytest.mark.parametrize("scene", SCENES, ids=[p.stem for p in SCENES])
 def test_example_scene_runs(scene, tmp_path):
+    """Every scene runs (``sorofem run``: a static solve, or a trajectory with [dynamics]), and
+    a scene with [estimate] or [control] also through that command. Their physics checks are
+    in test_example_scenes.py."""
+    data = tomllib.loads(scene.read_text(encoding="utf-8"))
+    if "surface" in data["mesh"]:
+        pytest.importorskip(sf.meshing.MESHER, reason=f"{scene.name} needs the optional mesher")
     out = tmp_path / "out"
     assert main(["run", str(scene), "--out", str(out), "--quiet"]) == 0
-    for name in ("result.vtu", "summary.json", "shape.png", "convergence.png"):
+    files = (("trajectory.pvd", "summary.json", "trajectory.png") if "dynamics" in data
+             else ("result.vtu", "summary.json", "shape.png", "convergence.png"))
+    for name in files:
         assert (out / name).is_file(), name
     summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert summary["converged"] is True
+    for command in ("estimate", "control"):
+        if command in data:
+            assert main([command, str(scene), "--out", str(tmp_path / command), "--quiet"]) == 0
+            for name in ("summary.json", "result.vtu", "fit.png"):
+                assert (tmp_path / command / name).is_file(), (command, name)
+
+
+def test_every_command_has_an_example_scene():
+    """run (static and [dynamics]), estimate, control, material regions, a tetrahedral mesh
+    file, a surface to tetrahedralise and a target read from a file: each has a scene."""
+    found: set[str] = set()
+    for scene in SCENES:
+        data = tomllib.loads(scene.read_text(encoding="utf-8"))
+        found |= {key for key in ("dynamics", "estimate", "control", "cable") if key in data}
+        found |= {f"mesh.{key}" for key in ("file", "surface", "box") if key in data["mesh"]}
+        found |= {"regions"} if data["material"].get("region") else set()
+        found |= {"target.positions_file"} if "positions_file" in data.get("target", {}) else set()
+    assert found >= {"dynamics", "estimate", "control", "cable", "mesh.file", "mesh.surface", "mesh.box", "regions",
+                     "target.positions_file"}, found
 
 
 def test_cantilever_scene_matches_example(cantilever_summary, tmp_path):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 import meshio
 import numpy as np
 import pytest
@@ -109,14 +110,33 @@ def test_write_result(tmp_path, beam):
     path = tmp_path / "result.vtu"
     write_result(path, result, extra_point_data={"marker": np.arange(beam.n_nodes, dtype=float)})
     back = meshio.read(path)
-    assert np.allclose(back.points, result.positions)
-    assert np.allclose(back.point_data["displacement"], result.displacement)
+    # The finite-element convention: rest points, and the motion as point data, so that
+    # ParaView's Warp By Vector (scale 1) gives the deformed body once.
+    assert np.allclose(back.points, beam.points)
+    assert np.allclose(back.points + back.point_data["displacement"], result.positions)
     assert "pressure" not in back.point_data
     assert "marker" in back.point_data
     assert np.allclose(back.cell_data["J"][0], result.J)
     assert np.allclose(back.cell_data["von_mises"][0], result.von_mises)
     with pytest.raises(sf.InputError, match="marker"):
         write_result(path, result, extra_point_data={"marker": np.zeros(3)})
+
+
+def test_write_result_deformed_and_the_result_as_meshio_and_pyvista(tmp_path, beam, monkeypatch):
+    result = _solved(beam)
+    write_result(tmp_path / "deformed.vtu", result, points="deformed")
+    deformed = meshio.read(tmp_path / "deformed.vtu")
+    assert np.allclose(deformed.points, result.positions)
+    with pytest.raises(sf.InputError, match="points: expected 'rest' or 'deformed'"):
+        write_result(tmp_path / "x.vtu", result, points="current")
+    mesh = result.to_meshio()
+    assert np.array_equal(mesh.points, beam.points) and np.array_equal(mesh.cells_dict["tetra"], beam.tets)
+    assert np.array_equal(mesh.point_data["displacement"], result.displacement)
+    assert np.array_equal(mesh.cell_data["von_mises"][0], result.von_mises)
+    assert np.array_equal(result.to_meshio("deformed").points, result.positions)
+    monkeypatch.setitem(sys.modules, "pyvista", None)  # as if PyVista were not installed
+    with pytest.raises(ImportError, match="pip install pyvista"):
+        result.to_pyvista()
 
 
 def test_write_result_refuses_input_mesh(tmp_path, beam):
@@ -129,10 +149,50 @@ def test_write_result_refuses_input_mesh(tmp_path, beam):
 
 def test_plots(tmp_path, beam):
     result = _solved(beam)
-    sf.plot.plot_rest_and_deformed(result, tmp_path / "shape.png", title="beam")
+    fig = sf.plot.plot_rest_and_deformed(result, tmp_path / "shape.png", title="beam")
+    assert fig.axes[0].get_title() == "beam"
     sf.plot.plot_convergence(result.report, tmp_path / "conv.png", tolerance=1e-8)
     for name in ("shape.png", "conv.png"):
         assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_plots_follow_the_matplotlib_convention(tmp_path, beam):
+    """Each plot function draws into ``ax=`` when given (a notebook's figure) and returns the
+    Figure; without ``path`` nothing is written."""
+    from matplotlib.figure import Figure
+
+    result = _solved(beam)
+    fig = Figure()
+    ax = fig.add_subplot()
+    assert sf.plot.plot_convergence(result.report, ax=ax) is fig
+    assert list(tmp_path.iterdir()) == []
+    # Iteration 0 is the initial residual: "converged after n iterations" ends at n.
+    x = ax.lines[0].get_xdata()
+    assert x[0] == 0 and x[-1] == result.report.iterations == len(result.report.residual_history) - 1
+    assert ax.get_title() == f"Newton: converged after {result.report.iterations} iterations"
+    fig3d = Figure()
+    ax3d = fig3d.add_subplot(projection="3d")
+    assert sf.plot.plot_rest_and_deformed(result, ax=ax3d) is fig3d
+    with pytest.raises(sf.InputError, match="3-D matplotlib Axes"):
+        sf.plot.plot_rest_and_deformed(result, ax=ax)
+    own = sf.plot.plot_convergence(result.report)
+    assert isinstance(own, Figure) and own is not fig
+
+
+def test_shape_tick_labels_do_not_meet_at_the_corners(beam):
+    """Seen from azimuth -60 the y axis starts where x ends and z rises where y ends: no tick
+    label at y's ends, nor at z's lower end."""
+    cube = sf.Mesh.box(size=(0.1, 0.1, 0.1), cells=(2, 2, 2))
+    for result in (_solved(beam), _solved(cube)):  # a slender body (short y and z) and a compact one
+        ax = sf.plot.plot_rest_and_deformed(result).axes[0]
+        for axis, (lo, hi), ends in ((ax.yaxis, ax.get_ylim(), (True, True)), (ax.zaxis, ax.get_zlim(), (True, False))):
+            ticks = axis.get_major_locator()()
+            margin = 0.1 * (hi - lo)
+            assert len(ticks) >= 1
+            if ends[0]:
+                assert min(ticks) > lo + margin
+            if ends[1]:
+                assert max(ticks) < hi - margin
 
 
 # ---------------------------------------------------------------------------

@@ -19,7 +19,7 @@ PACKAGE = Path(__file__).resolve().parent.parent / "python" / "sorofem"
 #: The layers, lowest first. A module may import modules of lower layers only.
 LAYERS: list[tuple[str, ...]] = [
     ("errors",),
-    ("_extension", "_validate", "_version", "_deprecated", "progress"),
+    ("_extension", "_validate", "_version", "_deprecated", "_text", "progress"),
     ("_formats",),
     ("mesh",),
     ("io",),
@@ -39,6 +39,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("inverse._parameters", "inverse.results"),
     ("inverse._problem",),
     ("inverse._optimizers",),
+    ("inverse._analysis",),
     ("inverse._gradient", "inverse._estimate", "inverse._control"),
     ("inverse",),
     ("scene._spec",),

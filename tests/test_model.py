@@ -30,7 +30,7 @@ def test_unit_tet_volume_and_properties():
     assert mesh.volumes == pytest.approx([1 / 6])
     assert mesh.reoriented.size == 0
     assert mesh.boundary_faces().shape == (4, 3)
-    lo, hi = mesh.bounds()
+    lo, hi = mesh.bounds
     assert lo.tolist() == [0, 0, 0] and hi.tolist() == [1, 1, 1]
     assert "n_nodes=4" in repr(mesh)
 
@@ -124,7 +124,7 @@ def test_nodes_in_box_rejects_swapped_bounds(beam):
 
 def test_scaled(beam):
     small = beam.scaled(1e-3)
-    assert small.bounds()[1] == pytest.approx([1e-3, 1e-4, 1e-4])
+    assert small.bounds[1] == pytest.approx([1e-3, 1e-4, 1e-4])
     assert small.volumes.sum() == pytest.approx(1e-11)
     with pytest.raises(sf.ParameterError, match="factor"):
         beam.scaled(-1.0)

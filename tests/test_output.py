@@ -133,7 +133,7 @@ def test_control_follows_directory_and_switches(tmp_path, capsys):
              '\n[output]\ndirectory = "fit"\nvtu = false\n')
     scene = _scene(tmp_path, extra, base=base)
     assert main(["control", str(scene), "--quiet"]) == 0
-    assert _files(scene.parent / "fit") == {"summary.json"}
+    assert _files(scene.parent / "fit") == {"summary.json", "fit.png"}  # [output] png = true by default
 
 
 def test_directory_never_overwrites_the_scene_inputs(tmp_path, capsys):

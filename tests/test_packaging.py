@@ -66,7 +66,7 @@ def test_every_import_is_declared() -> None:
     the module that imports it (the viewer's trimesh was once used without being declared)."""
     runtime = _requirements()
     extras = {name: _requirements(name) for name in PYPROJECT["optional-dependencies"]}
-    module_extra = {"viewer": "viewer", "meshing": "mesh"}
+    module_extra = {"viewer": "viewer", "meshing": "mesh", "static": "pyvista"}
     missing = []
     for top, modules in _third_party_imports().items():
         distribution = _distribution(top)
@@ -114,9 +114,11 @@ def test_changelog_follows_keep_a_changelog() -> None:
 
 
 def test_install_instructions_name_what_works() -> None:
-    """sorofem is not on PyPI: ``pip install "sorofem[viewer]"`` fails. The README and the
-    documentation pages say what works (from a checkout, or a wheel of ``make wheel``)."""
-    pages = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+    """sorofem is not on PyPI: ``pip install "sorofem[viewer]"`` fails. The README, the
+    documentation pages, the package's hints (viewer, mesher) and the examples say what works
+    (from a checkout, or a wheel of ``make wheel``)."""
+    pages = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md")), *sorted((ROOT / "python").rglob("*.py")),
+             *sorted((ROOT / "examples").rglob("*.py"))]
     from_index = re.compile(r"pip install\s+['\"]?sorofem\b")
     wrong = [f"{p.relative_to(ROOT)}: {m[0]}" for p in pages for m in from_index.finditer(p.read_text(encoding="utf-8"))]
     assert not wrong, wrong

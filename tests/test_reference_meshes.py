@@ -79,7 +79,7 @@ def test_box2_is_the_box_cantilever(shared_data, cantilever):
     box = sf.Mesh.box(SIZE, (8, 2, 2))
     assert (box2.n_nodes, box2.n_tets) == (81, 192)
     assert box2.reoriented.size == 0
-    lo, hi = box2.bounds()
+    lo, hi = box2.bounds
     np.testing.assert_allclose(lo, 0.0, atol=1e-12)
     np.testing.assert_allclose(hi, SIZE, rtol=1e-12)
     assert box2.volumes.sum() == pytest.approx(0.004, rel=1e-12)
@@ -129,7 +129,7 @@ def test_hammerbot_mesh_and_clamp(shared_data):
     assert scene["mesh"].name == "hammerbot_fine.tet" and scene["scale"] == 0.01
     mesh = sf.Mesh.read(scene["mesh"], scale=scene["scale"])
     assert (mesh.n_nodes, mesh.n_tets) == (2346, 9011)
-    lo, hi = mesh.bounds()
+    lo, hi = mesh.bounds
     np.testing.assert_allclose(lo, (-0.05, -0.025, -0.01), atol=1e-12)
     np.testing.assert_allclose(hi, (0.05, 0.025, 0.01), atol=1e-12)
     # SolidFEM's y/z swap leaves x alone: the clamp is the x = -5 cm face.

@@ -55,7 +55,7 @@ forces = [{ nodes = [40], force = [0, 0, -1.0] }]
 """,
     )
     scene = sf.Scene.load(path)
-    assert scene.mesh.bounds()[1] == pytest.approx([4.0, 1.0, 1.0])
+    assert scene.mesh.bounds[1] == pytest.approx([4.0, 1.0, 1.0])
     assert scene.mesh.source == tmp_path / "meshes" / "box2.tet"
     assert scene.body.fixed_nodes.size == 18
     assert scene.body.prescribed_displacement[:, 0].max() == pytest.approx(0.1)
@@ -164,7 +164,7 @@ def test_box_origin_and_array_of_tables_forces(tmp_path):
     text += "\n[[loads.forces]]\nbox = { min = [1.099, 0, 0], max = [1.101, 5, 5] }\nforce = [0, 0, -0.5]\n"
     text = text.replace("[loads]\ngravity = [0, 0, -9.81]\n", "")
     scene = sf.Scene.load(write(tmp_path, text))
-    assert scene.mesh.bounds()[0].tolist() == [1, 2, 3]
+    assert scene.mesh.bounds[0].tolist() == [1, 2, 3]
     loaded = np.flatnonzero(np.any(scene.body.forces != 0, axis=1))
     assert loaded.size == 4
 
@@ -381,7 +381,7 @@ def test_axes_apply_after_scale_to_a_mesh_file(tmp_path):
     text = replace("box = { size = [0.1, 0.02, 0.02], cells = [4, 1, 1] }",
                    'file = "part.tet"\nscale = 0.01\naxes = ["+z", "x", "-y"]')
     scene = sf.Scene.load(write(tmp_path, text))
-    lo, hi = scene.mesh.bounds()
+    lo, hi = scene.mesh.bounds
     np.testing.assert_allclose(lo, [0, 0, -0.02], atol=1e-15)
     np.testing.assert_allclose(hi, [0.01, 0.04, 0], atol=1e-15)
     assert scene.mesh.source == tmp_path / "part.tet"

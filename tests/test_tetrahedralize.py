@@ -1,7 +1,7 @@
 """Closed surfaces to tetrahedral meshes (sorofem.meshing, sorofem.tetrahedralize).
 
 The input checks run without the mesher; the meshing tests need the optional extra
-(``pip install 'sorofem[mesh]'``) and are skipped without it.
+(``pip install ".[mesh]"`` from a checkout) and are skipped without it.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ ENVELOPE = 1e-3  # sf.tetrahedralize's default
 
 @pytest.fixture
 def mesher():
-    return pytest.importorskip(sf.meshing.MESHER, reason="the optional mesher is not installed: pip install 'sorofem[mesh]'")
+    return pytest.importorskip(sf.meshing.MESHER, reason=f"the optional mesher is not installed: {sf.meshing.INSTALL_HINT}")
 
 
 def icosphere(subdivisions: int, radius: float) -> tuple[np.ndarray, np.ndarray]:
@@ -178,7 +178,7 @@ def test_surface_files_are_checked(tmp_path):
 def test_missing_mesher_says_how_to_install(monkeypatch):
     monkeypatch.setitem(sys.modules, sf.meshing.MESHER, None)  # makes the import fail
     assert sf.meshing.mesher_available() is False
-    with pytest.raises(ImportError, match=r"pip install 'sorofem\[mesh\]'"):
+    with pytest.raises(ImportError, match=r'pip install "\.\[mesh\]" from a checkout'):
         sf.tetrahedralize((CUBE_POINTS, CUBE_TRIANGLES))
 
 
@@ -208,7 +208,7 @@ def test_cube_from_arrays(mesher, tmp_path, monkeypatch):
     bound = envelope_bound(CUBE_POINTS, CUBE_TRIANGLES)
     error = abs(mesh.volumes.sum() - SIDE**3)
     assert error <= bound and error < 1e-3 * SIDE**3
-    lo, hi = mesh.bounds()
+    lo, hi = mesh.bounds
     np.testing.assert_allclose(lo, 0.0, atol=ENVELOPE * mesh.size)
     np.testing.assert_allclose(hi, SIDE, atol=ENVELOPE * mesh.size)
     assert 20 < mesh.n_tets < 5000

@@ -20,7 +20,7 @@ import pytest
 
 import sorofem as sf
 
-viser = pytest.importorskip("viser", reason="optional extra sorofem[viewer] (viser) not installed")
+viser = pytest.importorskip("viser", reason="the optional extra viewer (viser) is not installed: pip install \".[viewer]\"")
 trimesh = pytest.importorskip("trimesh")
 
 from sorofem.dynamics import Keyframes  # noqa: E402

@@ -20,7 +20,10 @@ SCHEMA_MARKER = re.compile(r"<!-- scene-schema:[^>]*-->")
 KEYS_MARKER = re.compile(r"<!-- readme-scene-keys:[^>]*-->")
 # [`text`](relative/path) or [text](relative/path), not http(s) or in-page anchors.
 REPO_LINK = re.compile(r"\[`?([^\]`]+)`?\]\((?!https?:|#)([^)]+)\)")
-README_ANCHORS = {"#formulations": "theory.md#mixed-formulation"}
+README_ANCHORS = {
+    "#formulations": "theory.md#mixed-formulation",
+    "#from-a-surface-to-a-simulation": "getting-started.md#from-a-surface-to-a-simulation",
+}
 
 
 def scene_schema() -> str:

@@ -12,6 +12,10 @@ from numpy.typing import NDArray
 _F = NDArray[np.float64]
 _I = NDArray[np.int64]
 
+class InternalError(Exception):
+    """A bug in the core (a panic caught at the boundary); subclass of
+    sorofem.errors.SolverError, so a SorofemError and a RuntimeError."""
+
 class _Timings(TypedDict):
     assembly: float
     factorization: float
@@ -39,6 +43,8 @@ class _SolveOutput(_Report):
     positions: _F  # (n, 3)
     pressure: _F | None  # (n,) for mixed formulations, else None
     reactions: _F  # (n_fixed, 3), N
+    cable_points: list[_F]  # per cable (k, 3), m
+    cable_tensions: list[_F]  # per cable (k - 1,), N
 
 class _Cable(TypedDict, total=False):
     points: _F  # (k, 3), m; required
@@ -49,6 +55,7 @@ class _Cable(TypedDict, total=False):
     snap_tolerance: float  # m, default 0
     outside: str  # "error" (default) | "free"
     free_node_mass: float  # kg, default 0
+    damping: float  # N s/m per segment (dynamics only), default 0
 
 class _Trajectory(TypedDict):
     times: _F  # (frames,), s
@@ -58,6 +65,16 @@ class _Trajectory(TypedDict):
     kinetic_energy: _F  # (frames,), J
     iterations: list[int]  # Newton iterations per step
     cutbacks: int
+
+class _ParamGradient(TypedDict, total=False):
+    material: dict[str, _F]  # per material parameter name (Model.material_param_names), (m,)
+    density: _F  # (m,)
+    gravity: _F  # (3,)
+    cable_actuation: _F  # (n_cables,)
+    cable_stiffness: _F  # (n_cables,)
+    mu: _F  # aliases of the original API: material["mu"] (Neo-Hookean)
+    lam: _F  # material["lambda"] (Neo-Hookean)
+    rho: _F  # density
 
 class _ElementFields(TypedDict):
     J: _F  # (m,)
@@ -79,6 +96,87 @@ def rest_volumes(points: _F, tets: _I) -> _F:
 def boundary_faces(points: _F, tets: _I) -> _I:
     """Outward-oriented boundary triangles, (k, 3)."""
 
+def material_param_names(model: str, options: dict[str, Any] | None = None) -> list[str]:
+    """Parameter names of a material model ("neo_hookean": ["mu", "lambda"]), in the order
+    the core stores them. Raises ParameterError for an unknown model or option."""
+
+class SolveOptions:
+    """Newton settings, validated once (ParameterError naming the bad one).
+
+    load_steps and max_cutbacks apply to static solves; a dynamic step that fails is halved,
+    up to six times."""
+
+    def __init__(
+        self,
+        tolerance: float = 1e-8,
+        max_iterations: int = 50,
+        load_steps: int = 1,
+        max_cutbacks: int = 8,
+        pressure_iterates: bool = True,
+    ) -> None: ...
+    @property
+    def tolerance(self) -> float:
+        """Relative residual at which Newton stops (> 0)."""
+    @property
+    def max_iterations(self) -> int:
+        """Newton iterations per load step (>= 1)."""
+    @property
+    def load_steps(self) -> int:
+        """Initial number of equal load increments (>= 1)."""
+    @property
+    def max_cutbacks(self) -> int:
+        """How many times in total a load increment may be halved after a failure."""
+    @property
+    def pressure_iterates(self) -> bool:
+        """Standard formulation: Hessians at element pressure iterates (same solution, fewer
+        iterations under large rotations)."""
+    def to_dict(self) -> dict[str, Any]:
+        """The settings as the constructor's keyword arguments."""
+
+class Mesh:
+    """A tetrahedral mesh validated once (finite points, indices in range, no degenerate tet;
+    inverted tets reoriented or rejected). Models built with Model.from_mesh share it.
+
+    Example: ``m = Mesh.box(np.array([1.0, 0.1, 0.1]), np.array([8, 2, 2]), np.zeros(3));
+    m.nodes_on_plane(np.array([1.0, 0, 0]), np.array([1.0, 0, 0])).size == 9``."""
+
+    def __init__(self, points: _F, tets: _I, orientation: str = "reorient") -> None:
+        """points (n, 3) m, tets (m, 4); orientation "reorient" | "reject". Raises ShapeError,
+        InputError (non-finite, index out of range) or MeshError (degenerate, inverted)."""
+    @staticmethod
+    def box(size: _F, cells: _I, origin: _F) -> Mesh:
+        """Hex grid [origin, origin + size] split into 6 tets per hex (see box_mesh)."""
+    @property
+    def points(self) -> _F:
+        """Rest coordinates (n, 3), m (a copy)."""
+    @property
+    def tets(self) -> _I:
+        """Tetrahedra (m, 4), positively oriented (a copy)."""
+    @property
+    def volumes(self) -> _F:
+        """Rest volume per tet (m,), m^3."""
+    @property
+    def reoriented(self) -> _I:
+        """Indices of the tets that were inverted in the input and reoriented."""
+    @property
+    def n_nodes(self) -> int: ...
+    @property
+    def n_tets(self) -> int: ...
+    @property
+    def diameter(self) -> float:
+        """Bounding-box diagonal, m: the scale of relative tolerances."""
+    def boundary_faces(self) -> tuple[_I, _I]:
+        """Outward-oriented boundary triangles (k, 3), sorted, and the tet owning each (k,)."""
+    def nodes_in_box(self, min: _F, max: _F) -> _I:
+        """Sorted indices of the nodes in the closed box [min, max] (each (3,), m)."""
+    def nodes_on_plane(self, point: _F, normal: _F, tol: float = 1e-9) -> _I:
+        """Sorted indices of the nodes within tol * diameter of the plane through point with
+        normal (any non-zero length): tol is relative to the mesh size."""
+    def locate(self, points: _F, search_radius: float = 0.0) -> tuple[_I, _F, _F]:
+        """For points (k, 3): the tet containing each (or the closest within search_radius m;
+        -1 when none) (k,), barycentric weights in it (k, 4; NaN when none) and the distance
+        to the located point (k,), m (0 inside, inf when none)."""
+
 class Model:
     """Discrete model of one body with a fixed node set; caches the sparsity pattern and
     the symbolic factorisation."""
@@ -91,17 +189,33 @@ class Model:
         formulation: str = "standard",
         options: dict[str, Any] | None = None,
         cables: list[_Cable] | None = None,
+        terms: dict[str, Any] | None = None,
     ) -> None:
         """formulation "standard" | "mixed"; options: "volumetric" ("log": c = ln J, default |
         "linear": c = J - 1; both formulations), "pressure_mass" ("consistent", default |
-        "lumped"; mixed only, ignored otherwise). The mixed unknowns are the free
-        displacements and one pressure per node (Pa), fixed nodes included."""
+        "lumped"; mixed only, ignored otherwise). terms: the inputs of the optional energy
+        terms by name: "cables" (the same list as `cables`, not both). The mixed unknowns are the free
+        displacements and one pressure per node (Pa), fixed nodes included. The unknowns are
+        ordered: 3 n node displacements, then 3 per free cable node, then (mixed) n pressures."""
+    @staticmethod
+    def from_mesh(
+        mesh: Mesh,
+        fixed: _I,
+        formulation: str = "standard",
+        options: dict[str, Any] | None = None,
+        cables: list[_Cable] | None = None,
+        terms: dict[str, Any] | None = None,
+    ) -> Model:
+        """A model of a validated Mesh (shared, not copied); arguments as for the constructor."""
+    @property
+    def mesh(self) -> Mesh:
+        """The model's mesh (shared)."""
     @property
     def n_free(self) -> int:
         """Number of free degrees of freedom."""
     def set_material(self, mu: _F, lam: _F, rho: _F) -> None:
-        """Per-element shear modulus, Lame lambda (Pa) and density (kg/m^3), each (m,).
-        Raises ParameterError for mu <= 0, lam < 0 (lam <= 0 when mixed) or rho < 0."""
+        """Neo-Hookean: per-element shear modulus, Lame lambda (Pa) and density (kg/m^3), each
+        (m,). Raises ParameterError for mu <= 0, lam < 0 (lam <= 0 when mixed) or rho < 0."""
     def set_material_model(
         self,
         model: str,
@@ -110,25 +224,31 @@ class Model:
         options: dict[str, Any] | None = None,
     ) -> None:
         """Any material model by name ("neo_hookean", "mooney_rivlin", "yeoh", "ogden"), its
-        parameters by name (each (m,), every name of `material_param_names` once), density (m,)
-        kg/m^3 and the model's options ("neo_hookean": "volumetric" "log" | "linear", default the
-        constructor's; "ogden": "terms" 1 to 3). Raises ParameterError naming the parameter and
-        the tet."""
+        parameters by name (each (m,), every name of material_param_names(model) exactly once),
+        density (m,) kg/m^3 and options ("neo_hookean": "volumetric" "log" | "linear", default
+        the constructor's; "ogden": "terms" 1 to 3). Raises ParameterError naming the parameter
+        (and the tet) that is out of range."""
+    @property
+    def material_model(self) -> str:
+        """The material model's name."""
     @property
     def material_param_names(self) -> list[str]:
-        """The material's parameter names, in storage order."""
+        """The material's parameter names, in storage order (the keys of "material")."""
     def solve(
         self,
         gravity: _F,
         forces: _F,
         prescribed: _F,
         initial: _F | None = None,
-        tolerance: float = 1e-8,
-        max_iterations: int = 50,
-        load_steps: int = 1,
+        tolerance: float | None = None,
+        max_iterations: int | None = None,
+        load_steps: int | None = None,
+        *,
+        options: SolveOptions | None = None,
     ) -> _SolveOutput:
         """Static equilibrium. gravity (3,), forces (n, 3), prescribed (k, 3) aligned with
-        `fixed`, initial positions (n, 3) or None; max_iterations is per load step.
+        `fixed`, initial positions (n, 3) or None. Newton settings: options, or the keyword
+        arguments (defaults 1e-8, 50 per load step, 1), not both.
         Raises ConvergenceError whose `.report` is a _Report."""
     def element_fields(self, positions: _F) -> _ElementFields:
         """Per-element J and von Mises stress at the given positions (n, 3)."""
@@ -139,13 +259,15 @@ class Model:
     def time_factorization(self, repeats: int) -> list[float]:
         """Seconds of each of `repeats` bare numeric factorisations of the Hessian at the last
         equilibrium (the rest state before any solve): a benchmark diagnostic."""
-    def adjoint(self, d_objective_d_positions: _F) -> dict[str, Any]:
+    def adjoint(self, d_objective_d_positions: _F) -> _ParamGradient:
         """Adjoint gradient of a scalar objective of the last equilibrium's positions:
-        dO/dx (n, 3) -> dO/dtheta as {"mu", "lam", "rho": (m,), "gravity": (3,),
-        "cable_actuation", "cable_stiffness": (n_cables,)}. Needs a static solve with the
-        current parameters (raises ParameterError otherwise)."""
+        dO/dx (n, 3) -> dO/dtheta: "material" {name: (m,)}, "density" (m,), "gravity" (3,),
+        "cable_actuation", "cable_stiffness" (n_cables,), and the original keys "mu", "lam",
+        "rho". Needs a static solve with the current parameters (raises ParameterError
+        otherwise)."""
     def forward(self, direction: dict[str, Any]) -> dict[str, Any]:
-        """Forward sensitivity along a parameter direction (any of the adjoint's keys):
+        """Forward sensitivity along a parameter direction (any of the adjoint's keys, the
+        material's also inside "material"; missing ones are zero):
         {"dx": (n, 3) m per unit, "dp": (n,) Pa per unit or None}."""
     def cable_rest_lengths(self) -> list[list[float]]: ...
     def cable_placements(self) -> list[list[tuple[str, int, float]]]:
@@ -162,10 +284,13 @@ class Model:
         stiffness_damping: float = 0.0,
         initial_positions: _F | None = None,
         initial_velocities: _F | None = None,
-        tolerance: float = 1e-8,
-        max_iterations: int = 50,
+        tolerance: float | None = None,
+        max_iterations: int | None = None,
         save_every: int = 1,
+        *,
+        options: SolveOptions | None = None,
     ) -> _Trajectory:
         """Implicit Euler with lumped mass and Rayleigh damping (alpha_M 1/s, beta_K s);
-        actuation (steps, n_cables) alphas per step. Raises ConvergenceError when a step fails
+        actuation (steps, n_cables) alphas per step; Newton settings per step as for solve
+        (load_steps and max_cutbacks do not apply). Raises ConvergenceError when a step fails
         even after halving it six times."""

@@ -109,7 +109,20 @@ def read_volume(path: Path) -> tuple[NDArray[np.float64], NDArray[np.int64], NDA
         other = path.with_suffix(".ele" if path.suffix == ".node" else ".node")
         if not other.is_file():
             raise FileNotFoundError(f"mesh file not found: {other} (the TetGen companion of {path})")
+    if path.suffix.lower() in SURFACE_FORMATS:
+        raise MeshError(f"{path}: a {path.suffix.lower()} file holds a triangle surface, not tetrahedra; "
+                        f"{_fill_hint(path)}")
     return _read_meshio_volume(path)
+
+
+#: Suffixes of triangle-surface formats (no volume cells): a volume mesh is made from them by
+#: sf.tetrahedralize.
+SURFACE_FORMATS = (".stl", ".obj", ".ply", ".off")
+
+
+def _fill_hint(path: Path) -> str:
+    return (f"fill it with tetrahedra by sf.tetrahedralize({path.name!r}, edge_length=...) (the optional extra "
+            f"'mesh'), or in a scene with [mesh] surface = \"{path.name}\" and edge_length")
 
 
 def _read_tet(path: Path) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
@@ -155,8 +168,9 @@ def _read_meshio_volume(path: Path) -> tuple[NDArray[np.float64], NDArray[np.int
     blocks = [np.asarray(m.cells[i].data, dtype=np.int64) for i in tetra]
     if not blocks:
         found = sorted({c.type for c in m.cells}) or ["none"]
+        surface = f": a surface; {_fill_hint(path)}" if "triangle" in found else ""
         raise MeshError(
-            f"{path}: no linear tetrahedra ('tetra' cells) found; cell types in the file: {', '.join(found)}"
+            f"{path}: no linear tetrahedra ('tetra' cells) found; cell types in the file: {', '.join(found)}{surface}"
         )
     tets = np.concatenate(blocks)
     points = np.asarray(m.points, dtype=np.float64)

@@ -38,6 +38,10 @@ PRESSURE_MASSES: tuple[str, ...] = ("consistent", "lumped")
 class Body:
     """A mesh, a material, boundary conditions and nodal loads.
 
+    The material, the formulation and its options may be changed later (``body.formulation =
+    "mixed"``): the new value is checked as in the constructor and the next solve uses it.
+    :meth:`replace` gives a copy with other values instead.
+
     Parameters
     ----------
     mesh
@@ -61,10 +65,6 @@ class Body:
         Mixed only (ignored by ``"standard"``): the pressure mass matrix ``M_p`` of the
         compliance ``C = M_p / lambda``, ``"consistent"`` (default, exact P1) or
         ``"lumped"`` (diagonal).
-
-    The material, the formulation and its options may be changed later (``body.formulation =
-    "mixed"``): the new value is checked as here and the next solve uses it. :meth:`replace`
-    gives a copy with other values instead.
 
     Raises
     ------

@@ -12,7 +12,10 @@ Usage::
     sorofem --version
 
 ``run`` writes ``DIR/result.vtu``, ``DIR/summary.json``, ``DIR/shape.png`` and
-``DIR/convergence.png``. It only ever writes those names and never deletes anything.
+``DIR/convergence.png`` (and ``DIR/deformed.vtu`` with ``[output] deformed = true``). It only
+ever writes those names and never deletes anything. ``result.vtu`` holds the **rest** mesh with
+the point data ``displacement`` (the finite-element convention: ParaView's Warp By Vector on it
+shows the deformed body); ``deformed.vtu`` the same data on the deformed mesh.
 ``summary.json`` records, besides the solver report, the volume bookkeeping
 ``volume_change`` ((V_deformed - V_rest) / V_rest) and ``mean_log_j`` (sum V_e ln J_e / V),
 and for ``kind = "mixed"`` the pressure range ``min_pressure``/``max_pressure`` (Pa); the
@@ -35,7 +38,12 @@ write over a file the scene reads (the scene, its mesh, its ``[target]`` surface
 cables that bring ``[target]`` closest (:func:`sorofem.control`). Both use the scene's gravity
 and ``[solver]`` options (the Newton tolerance no looser than 1e-10) and write ``DIR/summary.json`` (estimate: the parameters, the material
 as (mu, lambda) and (E, nu), the residual, forward solves and history; control: actuation,
-distance, reachable, forward solves, history) and ``DIR/result.vtu`` (the final equilibrium).
+distance, reachable, forward solves, history), ``DIR/result.vtu`` (the final equilibrium) and
+``DIR/fit.png`` (goal against model points, misfit history). ``estimate`` prints each parameter
+with its standard error (rounded to it), says which ones ended on a bound (no standard error
+there: the covariance is that of the others, with them held), and, when the fit is poorly
+conditioned, profiles the misfit along the worst determined parameter (``summary.json``
+``profile``, ``DIR/profile.png``).
 An estimate that does not converge, or a control target that is not reachable, exits 3
 (the outputs are still written). They follow ``[output]`` ``directory``, ``summary`` and ``vtu``.
 
@@ -68,13 +76,14 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from ._text import plural
 from ._version import __version__
 from .cables import placement_counts, write_cables
 from .convert import run_command as convert_command
 from .errors import ConvergenceError, InputError, SolverError
 from .inverse import DEFAULT_TOLERANCE, control, estimate
 from .io import read_mesh, write_result
-from .plot import plot_convergence, plot_rest_and_deformed, plot_trajectory
+from .plot import plot_convergence, plot_fit, plot_profile, plot_rest_and_deformed, plot_trajectory
 from .progress import default as progress_default
 from .scene import Scene, schema_text
 from .solver import SolveReport
@@ -103,8 +112,47 @@ class _Parser(argparse.ArgumentParser):
         raise _UsageError(f"{message} (see '{self.prog} --help')")
 
 
+#: The epilog of ``sorofem --help``.
+EPILOG = """\
+examples:
+  sorofem run examples/scenes/cantilever.toml --out results/cantilever
+  sorofem run examples/scenes/dynamics.toml --out results/dynamics       # [dynamics]: a trajectory
+  sorofem estimate examples/scenes/estimate.toml --out results/estimate  # fit [estimate] to [target]
+  sorofem control examples/scenes/control.toml --out results/control     # cable actuations for [target]
+  sorofem info robot.msh --scale 1e-3                                    # mesh statistics and quality
+  sorofem convert robot.msh robot.vtu                                    # see 'sorofem convert --help'
+  sorofem schema --out scene.schema.json                                 # for editors
+
+exit codes:
+  0    success
+  2    bad input: scene, mesh or arguments (one 'error: ...' line on stderr)
+  3    the solver failed, an estimate did not converge or a control target is not reachable
+       (summary.json is still written)
+  1    unexpected error (a bug: please report it with the traceback)
+  130  interrupted (Ctrl-C)
+
+documentation: docs/cli.md and docs/scene.md, or 'sorofem COMMAND --help'"""
+
+#: The epilog of ``sorofem convert --help``: what each output suffix writes.
+CONVERT_EPILOG = """\
+output formats (by the suffix of OUT):
+  .tet                 sorofem's text format (full float precision)
+  .msh                 Gmsh 4.1 ASCII
+  .node, .ele          TetGen (both STEM.node and STEM.ele are written)
+  .stl .obj .ply .off  the boundary surface (outward-oriented triangles)
+  .vtu .vtk .mesh ...  any other volume format meshio writes (the tetrahedra)
+
+input formats: .tet, Gmsh .msh (2.2, 4.x), TetGen .node/.ele, and any volume mesh meshio reads
+(.vtu, .vtk, .mesh, ...). A surface (.stl, .obj) is not a volume mesh: fill it with tetrahedra by
+sf.tetrahedralize or a scene's [mesh] surface = "robot.stl".
+
+example:
+  sorofem convert robot_mm.msh robot.vtu --scale 1e-3"""
+
+
 def _build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="sorofem", description="Simulate cable-driven silicone soft robots.")
+    parser = _Parser(prog="sorofem", description="Simulate, calibrate and control cable-driven silicone soft robots.",
+                     epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"sorofem {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
@@ -130,13 +178,15 @@ def _build_parser() -> argparse.ArgumentParser:
     info.add_argument("--scale", type=float, default=1.0, help="coordinate scale factor (default 1)")
     info.add_argument("--json", action="store_true", help="print as JSON")
 
-    convert = sub.add_parser("convert", help="convert a mesh file to another format (see sorofem.convert)")
+    convert = sub.add_parser("convert", help="convert a mesh file to another format (.tet, .msh, .node/.ele, .vtu, "
+                             ".stl, ...)", description="Convert a tetrahedral mesh to the format of OUT's suffix.",
+                             epilog=CONVERT_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     convert.add_argument("input", type=Path, metavar="IN", help="mesh file (.tet or any format meshio reads)")
     convert.add_argument("output", type=Path, metavar="OUT", help="output file; its suffix picks the format")
     convert.add_argument("--scale", type=float, default=1.0, help="coordinate scale factor (default 1)")
     convert.add_argument("--quiet", action="store_true", help="print nothing on success")
 
-    view = sub.add_parser("view", help="interactive 3-D view in the browser (needs sorofem[viewer])")
+    view = sub.add_parser("view", help="interactive 3-D view in the browser (extra 'viewer': pip install \".[viewer]\")")
     view.add_argument("scene", type=Path,
                       help="TOML scene file, or a .pvd / the --out folder of a dynamic run (played back)")
     view.add_argument("--trajectory", action="store_true", help="simulate the scene's [dynamics] and play it")
@@ -241,8 +291,8 @@ def _selected_outputs(scene: Any) -> list[str]:
         names = DYNAMICS_OUTPUT_NAMES
     else:
         wanted = {"result.vtu": "vtu", "summary.json": "summary", "shape.png": "png", "convergence.png": "png",
-                  "cables.vtu": "cables"}
-        names = OUTPUT_NAMES + (CABLE_OUTPUT_NAMES if scene.cables else ())
+                  "cables.vtu": "cables", "deformed.vtu": "deformed"}
+        names = OUTPUT_NAMES + (CABLE_OUTPUT_NAMES if scene.cables else ()) + ("deformed.vtu",)
     return [name for name in names if switches[wanted[name]]]
 
 
@@ -325,6 +375,8 @@ def _run(args: argparse.Namespace) -> int:
     summary = {**base, **result.to_dict()}
     if "result.vtu" in outputs:
         write_result(outputs["result.vtu"], result)
+    if "deformed.vtu" in outputs:
+        write_result(outputs["deformed.vtu"], result, points="deformed")
     if "cables.vtu" in outputs:
         write_cables(outputs["cables.vtu"], result)
     text = _write_summary(outputs, summary)
@@ -388,8 +440,9 @@ def _run_dynamics(
     elif not args.quiet:
         print(f"{scene.path.name}: {scene.mesh.n_nodes} nodes, {scene.mesh.n_tets} tets, {scene.formulation}, "
               f"{len(scene.cables)} cable(s)")
-        print(f"{summary['steps']} steps of {summary['dt']:g} s: {summary['newton_iterations']} Newton iterations "
-              f"(max {summary['max_iterations_per_step']} per step), {summary['cutbacks']} cutbacks, "
+        print(f"{plural(summary['steps'], 'step')} of {summary['dt']:g} s: "
+              f"{plural(summary['newton_iterations'], 'Newton iteration')} "
+              f"(max {summary['max_iterations_per_step']} per step), {plural(summary['cutbacks'], 'cutback')}, "
               f"{summary['timings']['simulate']:.3g} s")
         print(f"final kinetic energy {summary['final_kinetic_energy']:.3e} J (max {summary['max_kinetic_energy']:.3e} J), "
               f"max displacement {summary['max_displacement']:.6g} m")
@@ -412,7 +465,7 @@ def _inverse(args: argparse.Namespace) -> int:
     if section is None:
         raise InputError(f"{scene.path}: '{command}' needs an [{command}] table")
     out, label = _output_folder(args, scene)
-    switches = {"summary.json": scene.output["summary"], "result.vtu": scene.output["vtu"]}
+    switches = {"summary.json": scene.output["summary"], "result.vtu": scene.output["vtu"], "fit.png": scene.output["png"]}
     outputs = {name: out / name for name, on in switches.items() if on}
     _refuse_inputs(outputs, scene, label)
     # Sensitivities are only as accurate as the equilibria: never looser than the inverse default.
@@ -443,17 +496,11 @@ def _inverse(args: argparse.Namespace) -> int:
             "residual": fit.residual,
             "history": fit.history,
         }
-        ok, result = fit.converged, fit.result
-        forms = "; ".join(
-            ", ".join(f"{m.model.parameter(n).symbol} {_fmt(m.value(n))}" + (f" {m.model.parameter(n).units}"
-                      if m.model.parameter(n).units else "") for n in form.names)
-            for form in m.model.forms
-        )
-        lines = [
-            f"{scene.path.name}: fitted {', '.join(section['params'])} ({section['method']})",
-            forms,
-            f"residual {fit.residual:.3e} m (rms), {fit.forward_solves} forward solves, {fit.message}",
-        ]
+        ok, result, fitted = fit.converged, fit.result, fit
+        lines = [f"{scene.path.name}: {fit.summary()}"]
+        if fit.profile is not None and "fit.png" in outputs:
+            outputs["profile.png"] = out / "profile.png"
+            _refuse_inputs({"profile.png": outputs["profile.png"]}, scene, label)
         failure = f"the fit did not converge: {fit.message}"
     else:
         ctl = control(
@@ -461,7 +508,7 @@ def _inverse(args: argparse.Namespace) -> int:
             gravity=scene.gravity, options=options,
         )
         summary = {**base, **ctl.to_dict(), "history": ctl.history, "converged": ctl.reachable}
-        ok, result = ctl.reachable, ctl.result
+        ok, result, fitted = ctl.reachable, ctl.result, ctl
         lines = [
             f"{scene.path.name}: actuation {', '.join(f'{a:.6g}' for a in ctl.actuation)} "
             f"of cable(s) {section['cables']} ({section['method']})",
@@ -473,6 +520,10 @@ def _inverse(args: argparse.Namespace) -> int:
         out.mkdir(parents=True, exist_ok=True)
     if result is not None and "result.vtu" in outputs:
         write_result(outputs["result.vtu"], result)
+    if "fit.png" in outputs:
+        plot_fit(fitted, outputs["fit.png"])
+    if "profile.png" in outputs:
+        plot_profile(fitted, outputs["profile.png"])
     text = _write_summary(outputs, summary)
     if args.json:
         sys.stdout.write(text)
@@ -483,10 +534,6 @@ def _inverse(args: argparse.Namespace) -> int:
         print(f"error: {_one_line(Exception(failure))}{_report_in(outputs)}", file=sys.stderr)
         return EXIT_SOLVER
     return EXIT_OK
-
-
-def _fmt(value: Any) -> str:
-    return f"{value:.6g}" if np.ndim(value) == 0 else f"{np.min(value):.6g}..{np.max(value):.6g}"
 
 
 # ---------------------------------------------------------------------------
@@ -539,7 +586,7 @@ def tet_quality(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
 
 def _info(args: argparse.Namespace) -> int:
     mesh = read_mesh(args.mesh, scale=args.scale)
-    lo, hi = mesh.bounds()
+    lo, hi = mesh.bounds
     vol = mesh.volumes
     quality = tet_quality(mesh.points, mesh.tets)
     data = {

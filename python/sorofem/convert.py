@@ -24,7 +24,7 @@ Examples
 >>> from sorofem.convert import convert
 >>> sf.Mesh.box(size=(400, 100, 100), cells=(4, 1, 1)).write("/tmp/beam_mm.tet")
 >>> mesh = convert("/tmp/beam_mm.tet", "/tmp/beam.msh", scale=1e-3)
->>> sf.Mesh.read("/tmp/beam.msh").bounds()[1].tolist()
+>>> sf.Mesh.read("/tmp/beam.msh").bounds[1].tolist()
 [0.4, 0.1, 0.1]
 """
 

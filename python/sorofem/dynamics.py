@@ -39,6 +39,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ._deprecated import moved
+from ._text import plural
 from ._validate import as_finite, describe, non_negative, positive_int, positive_scalar
 from .body import Body
 from .cables import attached_rest_lengths, cable_index, segment_tensions
@@ -477,7 +478,7 @@ def _step_postfix(out: Mapping[str, Any], done: int, dt: float) -> str:
 
 
 def _postfix(t: float, per_step: float, cutbacks: int) -> str:
-    return f"t={t:.4g} s, {per_step:.1f} it/step, {cutbacks} cutbacks"
+    return f"t={t:.4g} s, {per_step:.1f} it/step, {plural(cutbacks, 'cutback')}"
 
 
 #: Wall-clock target of one chunk of steps while a progress line is shown, s.

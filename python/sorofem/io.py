@@ -50,7 +50,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Mapping, Protocol
+from typing import Any, Mapping, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -59,7 +59,8 @@ from ._formats import CELL_TAG_KEYS, Surface, meshio_read, read_surface, refuse_
 from .errors import InputError
 from .mesh import Mesh
 
-__all__ = ["read_mesh", "write_mesh", "write_result", "read_surface", "Surface", "CELL_TAG_KEYS", "meshio_read"]
+__all__ = ["read_mesh", "write_mesh", "write_result", "result_mesh", "read_points", "read_surface", "Surface",
+           "CELL_TAG_KEYS", "meshio_read"]
 
 PathLike = str | os.PathLike[str]
 
@@ -126,28 +127,85 @@ def write_mesh(path: PathLike, mesh: Mesh) -> None:
     mesh.write(path)
 
 
-def write_result(
-    path: PathLike,
+def read_points(path: PathLike) -> NDArray[np.float64]:
+    """Points ``(k, 3)`` from a file: NumPy's ``.npy`` (an array of shape ``(k, 3)``) or a text
+    table (``.csv``, ``.txt``, ``.dat``: three columns x, y, z separated by commas or
+    whitespace, ``#`` comments, at most one header line of column names).
+
+    Raises
+    ------
+    FileNotFoundError
+        No such file.
+    InputError
+        Not three finite columns, or a format other than these.
+
+    Examples
+    --------
+    >>> import numpy as np, sorofem as sf
+    >>> _ = open("/tmp/markers.csv", "w").write("x,y,z\n0.1,0,0.02\n0.2,0,0.02\n")
+    >>> sf.io.read_points("/tmp/markers.csv").shape
+    (2, 3)
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"points file not found: {path}")
+    suffix = path.suffix.lower()
+    if suffix == ".npy":
+        try:
+            arr = np.load(path, allow_pickle=False)
+        except (ValueError, OSError) as exc:
+            raise InputError(f"{path}: not a NumPy .npy array ({exc})") from None
+    elif suffix in (".csv", ".txt", ".dat"):
+        lines = [line.split("#", 1)[0].strip() for line in path.read_text(encoding="utf-8").splitlines()]
+        rows = [line.replace(",", " ").split() for line in lines if line]
+        try:
+            float(rows[0][0]) if rows else None
+        except ValueError:
+            rows = rows[1:]  # a header of column names
+        try:
+            arr = np.array([[float(v) for v in row] for row in rows], dtype=np.float64)
+        except ValueError as exc:
+            raise InputError(f"{path}: expected numbers in three columns x, y, z ({exc})") from None
+        if arr.size == 0 or any(len(row) != 3 for row in rows):
+            counts = sorted({len(row) for row in rows})
+            raise InputError(f"{path}: expected three columns x, y, z on every line, got {counts or 'no rows'}")
+    else:
+        raise InputError(f"{path}: expected a .npy array or a .csv/.txt table of points, got a {suffix or 'file without suffix'}")
+    if arr.ndim != 2 or arr.shape[1] != 3 or arr.dtype.kind not in "fiu":
+        raise InputError(f"{path}: expected an array of shape (k, 3), got shape {arr.shape} ({arr.dtype})")
+    arr = arr.astype(np.float64)
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{path}: expected finite coordinates")
+    return arr
+
+
+def result_mesh(
     result: ResultLike,
     extra_point_data: Mapping[str, ArrayLike] | None = None,
-) -> None:
-    """Write a result (normally ``.vtu``) for ParaView.
+    *,
+    points: str = "rest",
+) -> Any:
+    """A result as a :class:`meshio.Mesh`: linear tetrahedra with point data ``displacement``
+    (m), ``pressure`` (Pa, mixed formulation only) and ``extra_point_data``, cell data ``J``
+    (volume ratio) and ``von_mises`` (Pa).
 
-    The points are the **deformed** positions. Point data: ``displacement`` (m),
-    ``pressure`` (Pa, mixed formulations only) and ``extra_point_data``; cell data:
-    ``J`` (volume ratio) and ``von_mises`` (Pa). Use ParaView's "Warp By Vector" with
-    scale -1 on ``displacement`` to see the rest shape.
+    Parameters
+    ----------
+    points
+        ``"rest"`` (default, the finite-element convention): the rest positions, so that
+        ParaView's "Warp By Vector" on ``displacement`` (scale 1) shows the deformed body;
+        ``"deformed"``: the deformed positions (then warping would deform it twice).
 
     Raises
     ------
     InputError
-        ``path`` is the input mesh file, or ``extra_point_data`` has a wrong length.
+        ``points`` is neither, or ``extra_point_data`` has a wrong length.
     """
     import meshio
 
-    path = Path(path)
+    if points not in ("rest", "deformed"):
+        raise InputError(f"points: expected 'rest' or 'deformed', got {points!r}")
     mesh = result.mesh
-    refuse_overwrite(path, mesh.source)
     point_data: dict[str, np.ndarray] = {"displacement": result.displacement}
     if result.pressure is not None:
         point_data["pressure"] = result.pressure
@@ -159,7 +217,32 @@ def write_result(
             )
         point_data[str(name)] = arr
     cell_data = {"J": [result.J], "von_mises": [result.von_mises]}
-    meshio.write(
-        path,
-        meshio.Mesh(result.positions, [("tetra", mesh.tets)], point_data=point_data, cell_data=cell_data),
-    )
+    xyz = mesh.points if points == "rest" else result.positions
+    return meshio.Mesh(np.array(xyz), [("tetra", mesh.tets)], point_data=point_data, cell_data=cell_data)
+
+
+def write_result(
+    path: PathLike,
+    result: ResultLike,
+    extra_point_data: Mapping[str, ArrayLike] | None = None,
+    *,
+    points: str = "rest",
+) -> None:
+    """Write a result (normally ``.vtu``) for ParaView: :func:`result_mesh` written by meshio.
+
+    The points are the **rest** positions and the point data ``displacement`` carries the
+    motion (the finite-element convention): in ParaView, "Warp By Vector" on ``displacement``
+    with scale 1 shows the deformed body, once. ``points="deformed"`` writes the deformed
+    positions instead (e.g. a second file ``deformed.vtu`` to open without a filter).
+
+    Raises
+    ------
+    InputError
+        ``path`` is the input mesh file, ``points`` is unknown, or ``extra_point_data`` has a
+        wrong length.
+    """
+    import meshio
+
+    path = Path(path)
+    refuse_overwrite(path, result.mesh.source)
+    meshio.write(path, result_mesh(result, extra_point_data, points=points))

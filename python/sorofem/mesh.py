@@ -15,9 +15,10 @@ from __future__ import annotations
 import math
 import numbers
 import os
+import warnings
 from functools import cached_property
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable, NamedTuple, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -27,7 +28,23 @@ from ._formats import read_volume, refuse_overwrite, write_volume
 from ._validate import as_finite, as_float_array, describe, positive_scalar
 from .errors import InputError, MeshError, ParameterError, ShapeError
 
-__all__ = ["Mesh", "ORIENTATIONS"]
+__all__ = ["Mesh", "Bounds", "ORIENTATIONS"]
+
+
+class Bounds(NamedTuple):
+    """Axis-aligned bounding box: ``min`` and ``max``, each ``(3,)``, m.
+
+    Calling it (``mesh.bounds()``, from when :attr:`Mesh.bounds` was a method) still works for
+    one release and warns; use the property ``mesh.bounds``.
+    """
+
+    min: NDArray[np.float64]
+    max: NDArray[np.float64]
+
+    def __call__(self) -> "Bounds":
+        warnings.warn("Mesh.bounds() is deprecated: bounds is a property, use mesh.bounds (without the call)",
+                      DeprecationWarning, stacklevel=2)
+        return self
 
 #: What :class:`Mesh` does with inverted tetrahedra: swap two nodes, or raise.
 ORIENTATIONS: tuple[str, ...] = ("reorient", "reject")
@@ -228,14 +245,15 @@ class Mesh:
             self.__dict__["_boundary_faces"] = faces
         return faces
 
-    def bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Axis-aligned bounding box ``(min, max)``, each ``(3,)``."""
-        return self._points.min(axis=0), self._points.max(axis=0)
+    @property
+    def bounds(self) -> Bounds:
+        """Axis-aligned bounding box ``(min, max)``, each ``(3,)``, m: ``lo, hi = mesh.bounds``."""
+        return Bounds(self._points.min(axis=0), self._points.max(axis=0))
 
     @property
     def size(self) -> float:
         """Length of the bounding-box diagonal, m: the mesh's length scale."""
-        lo, hi = self.bounds()
+        lo, hi = self.bounds
         return float(np.linalg.norm(hi - lo))
 
     # -- node queries -----------------------------------------------------------------
@@ -310,7 +328,7 @@ class Mesh:
         return np.flatnonzero(mask).astype(np.int64)
 
     def __repr__(self) -> str:
-        lo, hi = self.bounds()
+        lo, hi = self.bounds
         fmt = lambda v: "[" + ", ".join(f"{x:.4g}" for x in v) + "]"  # noqa: E731
         extra = f", reoriented={self._reoriented.size}" if self._reoriented.size else ""
         src = f", source='{self.source}'" if self.source is not None else ""
@@ -340,7 +358,7 @@ class Mesh:
         --------
         >>> import sorofem as sf
         >>> mesh = sf.Mesh.box(size=(0.4, 0.1, 0.02), cells=(4, 1, 1))
-        >>> [float(v) for v in mesh.transformed(["x", "-z", "y"]).bounds()[1]]
+        >>> [float(v) for v in mesh.transformed(["x", "-z", "y"]).bounds[1]]
         [0.4, 0.0, 0.1]
         """
         names = list(axes) if isinstance(axes, (list, tuple)) else None

@@ -10,7 +10,8 @@ The mesher
 ----------
 The tetrahedralisation is done by fTetWild (Hu et al., "Fast Tetrahedral Meshing in the
 Wild", SIGGRAPH 2020; github.com/wildmeshing/fTetWild) through its PyPI wrapper
-``pytetwild``, an **optional** dependency: ``pip install 'sorofem[mesh]'``. Nothing else in
+``pytetwild``, an **optional** dependency: ``pip install ".[mesh]"`` from a checkout of sorofem
+(README, "Install"). Nothing else in
 sorofem needs it, and it is imported only when :func:`tetrahedralize` runs. Why this one:
 
 * **Licence.** fTetWild and ``pytetwild`` are MPL-2.0 (file-level copyleft: using the
@@ -84,7 +85,7 @@ __all__ = [
 #: The Python package that does the tetrahedralisation (fTetWild's wrapper).
 MESHER = "pytetwild"
 #: How to install it.
-INSTALL_HINT = "pip install 'sorofem[mesh]'"
+INSTALL_HINT = "pip install \".[mesh]\" from a checkout of sorofem (or pip install 'pytetwild>=0.2.3,<0.3')"
 #: A triangle is degenerate when its area is below this times its longest edge squared
 #: (an equilateral triangle has 0.43); rounding leaves ~1e-16 on collinear points.
 DEGENERATE_AREA = 1e-12
@@ -121,7 +122,7 @@ def require_mesher() -> Any:
         if exc.name and exc.name.split(".")[0] == "pyvista":
             raise ImportError(
                 f"the installed {MESHER} imports PyVista, which is not installed; install the "
-                f"version sorofem asks for ({INSTALL_HINT}, i.e. 'pytetwild>=0.2.3,<0.3') or "
+                f"version sorofem asks for ({INSTALL_HINT}) or "
                 f"PyVista (pip install pyvista)"
             ) from exc
         raise
@@ -369,7 +370,7 @@ def tetrahedralize(
 ) -> Mesh:
     """Fill a closed triangle surface with linear tetrahedra (fTetWild, optional extra).
 
-    Needs the optional mesher: ``pip install 'sorofem[mesh]'`` (see the module docstring
+    Needs the optional mesher: ``pip install ".[mesh]"`` from a checkout (see the module docstring
     for the choice of fTetWild). The surface is checked first (:func:`check_surface`), then
     meshed; the mesh is oriented and validated by :class:`sorofem.Mesh`, and its volume is
     compared with the volume the surface encloses (divergence theorem).
@@ -423,7 +424,7 @@ def tetrahedralize(
     Raises
     ------
     ImportError
-        The mesher is not installed (the message says ``pip install 'sorofem[mesh]'``).
+        The mesher is not installed (the message says how to install it: :data:`INSTALL_HINT`).
     FileNotFoundError
         No such surface file.
     ShapeError, MeshError

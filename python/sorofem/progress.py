@@ -1,54 +1,56 @@
-"""A small progress line on stderr for long runs (time integration, inverse problems).
+"""Progress bars for long runs (static solves, time integration, inverse problems), drawn by
+`rich <https://rich.readthedocs.io>`_.
 
-:func:`sorofem.simulate`, :func:`sorofem.estimate` and :func:`sorofem.control` take
-``progress=``:
+:func:`sorofem.solve_static`, :func:`sorofem.simulate`, :func:`sorofem.estimate` and
+:func:`sorofem.control` take ``progress=``:
 
-* ``None`` (default): automatic, a line is drawn only when stderr is a terminal (``isatty()``)
-  and only once the run has lasted :data:`DELAY` seconds, so quick calls print nothing. Under
-  CI, in a pipe, redirected to a file or in Jupyter (whose stderr is not a terminal) nothing is
-  written.
-* ``True``: always draw it, from the start (e.g. in Jupyter, which renders the carriage
-  returns).
+* ``None`` (default): automatic. On a terminal, or in a Jupyter notebook (rich's widget, which
+  needs ``ipywidgets``), a bar appears once the run has lasted :data:`DELAY` seconds, so quick
+  calls print nothing; in a pipe, a file or a CI log nothing is written.
+* ``True``: always, from the start. On a terminal or in Jupyter the bar is redrawn in place;
+  in a pipe, a file or a CI log its final state is written once, as one line.
 * ``False``: never.
-
-The line is rewritten in place with carriage returns (no terminal control sequences), fits the
-terminal width, shows the elapsed time and, when the total is known, a bar, the percentage
-and the estimated time left; a final newline leaves the last state on screen. It never raises
-because of the terminal: a closed or broken stream silently ends the drawing.
 
 :func:`default` changes what ``progress=None`` means within a ``with`` block, for a caller
 that knows better, e.g. a command line with ``--quiet``.
 
 Examples
 --------
->>> import sys
 >>> from sorofem.progress import Progress
 >>> with Progress(total=3, desc="work", unit="steps", enabled=False) as bar:  # silent
 ...     for _ in range(3):
-...         bar.update(1, postfix="loss 1e-3")
+...         bar.update(1, postfix="loss 1e-3 m^2")
 >>> bar.done
 3
 """
 
 from __future__ import annotations
 
-import math
-import shutil
 import sys
 import threading
-import time
 from contextlib import contextmanager
 from contextvars import ContextVar
 from typing import IO, Any, Iterator
 
-__all__ = ["Progress", "DELAY", "default", "is_enabled", "format_duration"]
+from rich.console import Console
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    ProgressColumn,
+    TaskProgressColumn,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
+from rich.progress import Progress as RichProgress
+from rich.table import Column
 
-#: Seconds an automatic (``progress=None``) line waits before it first appears.
+__all__ = ["Progress", "DELAY", "default", "is_enabled"]
+
+#: Seconds an automatic (``progress=None``) bar waits before it first appears.
 DELAY = 0.5
-#: Smallest interval between two redraws, s (the last state is always drawn).
-MIN_INTERVAL = 0.1
-#: An active line redraws itself this often, s, so the clock moves during one long call.
-REFRESH = 0.5
+#: Width of the line written once to a stream that is not a terminal (a log keeps it whole).
+LOG_WIDTH = 1000
 
 _DEFAULT: ContextVar[bool | None] = ContextVar("sorofem_progress_default", default=None)
 
@@ -71,56 +73,77 @@ def default(progress: bool | None) -> Iterator[None]:
         _DEFAULT.reset(token)
 
 
-def _isatty(stream: Any) -> bool:
+def _interactive(stream: Any) -> bool:
+    """A terminal, or a Jupyter kernel (where rich draws a widget whatever the stream)."""
     try:
-        return bool(stream.isatty())
+        if stream.isatty():
+            return True
     except (AttributeError, OSError, ValueError):
-        return False
+        pass
+    return Console(file=stream).is_jupyter
 
 
 def is_enabled(progress: bool | None, stream: Any = None) -> bool:
-    """Whether a progress line would be drawn on ``stream`` (default ``sys.stderr``)."""
+    """Whether a bar would be drawn on ``stream`` (default ``sys.stderr``)."""
     if progress is None:
         progress = _DEFAULT.get()
     if progress is None:
-        return _isatty(sys.stderr if stream is None else stream)
+        return _interactive(sys.stderr if stream is None else stream)
     return bool(progress)
 
 
-def format_duration(seconds: float) -> str:
-    """``m:ss`` below an hour, ``h:mm:ss`` above; ``?`` when unknown."""
-    if not math.isfinite(seconds) or seconds < 0:
-        return "?"
-    s = int(round(seconds))
-    h, rest = divmod(s, 3600)
-    m, s = divmod(rest, 60)
-    return f"{h}:{m:02d}:{s:02d}" if h else f"{m}:{s:02d}"
+class _Guarded:
+    """A stream whose write errors (a closed pipe, a reader gone) end the drawing instead of
+    raising in rich's refresh thread."""
+
+    def __init__(self, stream: Any) -> None:
+        self.stream = stream
+        self.broken = False
+
+    def write(self, text: str) -> int:
+        if not self.broken:
+            try:
+                self.stream.write(text)
+            except (OSError, ValueError, AttributeError):
+                self.broken = True
+        return len(text)
+
+    def flush(self) -> None:
+        if not self.broken:
+            try:
+                self.stream.flush()
+            except (OSError, ValueError, AttributeError):
+                self.broken = True
+
+    def isatty(self) -> bool:
+        try:
+            return bool(self.stream.isatty())
+        except (AttributeError, OSError, ValueError):
+            return False
+
+    def fileno(self) -> int:
+        return self.stream.fileno()
 
 
 class Progress:
-    """One progress line, redrawn in place on ``stream``.
+    """One progress bar on ``stream``, with a count, the elapsed time and, when the total is
+    known, the time left; ``postfix`` is free text after it (values with their units).
 
     Parameters
     ----------
     total
-        Number of units of work, or ``None`` when unknown (then no bar, no percentage and no
-        ETA: a count and the elapsed time).
+        Number of units of work, or ``None`` when unknown (a pulsing bar, no time left).
     desc
         Label at the start of the line.
     unit
         Name of the unit after the count (``"steps"``, ``"solves"``).
     enabled
-        ``True``, ``False`` or ``None`` (automatic: only if ``stream`` is a terminal, and only
-        after :data:`DELAY` seconds); see the module docstring.
+        ``True``, ``False`` or ``None`` (automatic); see the module docstring.
     stream
         Where to draw; default ``sys.stderr`` (looked up when the bar is created).
     delay
-        Seconds before the first draw; default 0 when drawing was asked for explicitly and
+        Seconds before the bar appears; default 0 when it was asked for explicitly and
         :data:`DELAY` when it is automatic.
-    refresh
-        An active line is redrawn every ``refresh`` seconds by a background thread (the
-        elapsed time moves on while one long solve runs); ``None`` or 0: only on updates.
-        Call :meth:`close` (or use ``with``) to stop it.
 
     Attributes
     ----------
@@ -128,12 +151,8 @@ class Progress:
         Whether this bar draws at all.
     done
         Units of work done so far.
-
-    Examples
-    --------
-    >>> bar = Progress(total=None, desc="estimate", unit="solves", enabled=False)
-    >>> bar.update(2, postfix="loss 3.2e-06")
-    >>> bar.close()
+    postfix
+        The text after the count.
     """
 
     def __init__(
@@ -145,31 +164,57 @@ class Progress:
         enabled: bool | None = None,
         stream: IO[str] | None = None,
         delay: float | None = None,
-        refresh: float | None = REFRESH,
     ) -> None:
         self.stream = sys.stderr if stream is None else stream
         explicit = enabled if enabled is not None else _DEFAULT.get()
         self.active = is_enabled(enabled, self.stream)
         self.delay = (0.0 if explicit else DELAY) if delay is None else float(delay)
         self.total = None if total is None else max(int(total), 0)
-        self.desc = desc
-        self.unit = unit
         self.done = 0
         self.postfix = ""
-        self.start = time.perf_counter()
-        self._last_draw = -math.inf
-        self._width = 0  # length of the line on screen, to blank out a longer previous one
-        self._drawn = False
-        self._closed = False
+        self._desc = desc
         self._lock = threading.RLock()
-        self._stop = threading.Event()
-        self._ticker: threading.Thread | None = None
-        if self.active and refresh:
-            self._ticker = threading.Thread(target=self._tick, args=(float(refresh),), name="sorofem-progress",
-                                            daemon=True)
-            self._ticker.start()
+        self._shown = False
+        self._closed = False
+        self._timer: threading.Timer | None = None
+        self._bar: RichProgress | None = None
+        if not self.active:
+            return
+        interactive = _interactive(self.stream)
+        self._out = _Guarded(self.stream)
+        console = Console(file=self._out, width=None if interactive else LOG_WIDTH, highlight=False)
+        # A bar and the time left only when the total is known; otherwise a count and the clock.
+        columns: list[ProgressColumn | str] = [TextColumn("{task.description}", markup=False)]
+        if self.total is not None:
+            columns += [BarColumn(), TaskProgressColumn(), MofNCompleteColumn()]
+        else:
+            columns.append(TextColumn("{task.completed}", markup=False))
+        columns += [TextColumn("{task.fields[unit]}", markup=False), TimeElapsedColumn()]
+        if self.total is not None:
+            columns.append(TimeRemainingColumn())
+        # A narrow terminal wraps the postfix onto a second line rather than cutting it; a log
+        # keeps the line whole.
+        tail = Column(overflow="fold") if interactive else Column(no_wrap=True, overflow="ignore")
+        columns.append(TextColumn("{task.fields[postfix]}", markup=False, table_column=tail))
+        self._bar = RichProgress(*columns, console=console, redirect_stdout=False, redirect_stderr=False)
+        self._task = self._bar.add_task(desc, total=self.total, unit=unit, postfix="")
+        if self.delay > 0:
+            self._timer = threading.Timer(self.delay, self._show)
+            self._timer.daemon = True
+            self._timer.start()
+        else:
+            self._show()
 
-    # -- public -------------------------------------------------------------------------
+    @property
+    def desc(self) -> str:
+        """The label at the start of the line (may be changed while the bar runs)."""
+        return self._desc
+
+    @desc.setter
+    def desc(self, text: str) -> None:
+        self._desc = text
+        if self._bar is not None:
+            self._bar.update(self._task, description=text)
 
     def update(self, n: int = 1, *, postfix: str | None = None) -> None:
         """Add ``n`` units of work done (and replace the text after the count)."""
@@ -177,111 +222,42 @@ class Progress:
 
     def set(self, done: int, *, postfix: str | None = None) -> None:
         """Set the units of work done (and the text after the count)."""
-        if not self.active:
-            self.done = done
-            if postfix is not None:
-                self.postfix = postfix
-            return
-        with self._lock:
-            self.done = done
-            if postfix is not None:
-                self.postfix = postfix
-            self._maybe_draw()
-
-    def refresh(self) -> None:
-        """Redraw now if due (elapsed time moves on while the work is in one long call)."""
-        if self.active:
-            with self._lock:
-                self._maybe_draw()
+        self.done = done
+        if postfix is not None:
+            self.postfix = postfix
+        if self._bar is not None:
+            self._bar.update(self._task, completed=done, postfix=self.postfix)
 
     def print(self, text: str) -> None:
-        """Write a line of text above the progress line (which is redrawn below it)."""
+        """Write a line of text above the bar (or as a plain line when no bar is shown)."""
         with self._lock:
-            if not self.active or not self._drawn or self._closed:
-                self._write(text + "\n")
+            if self._bar is not None and self._shown and not self._closed:
+                self._bar.console.print(text, markup=False, highlight=False, soft_wrap=True)
                 return
-            self._write("\r" + " " * self._width + "\r" + text + "\n")
-            self._width = 0
-            self._draw()
+        out = _Guarded(self.stream)
+        out.write(text + "\n")
+        out.flush()
 
     def close(self) -> None:
-        """Draw the final state and end the line (only if anything was drawn)."""
-        self._stop.set()
-        if self._ticker is not None and self._ticker is not threading.current_thread():
-            self._ticker.join()
+        """Stop the bar, leaving its final state on screen (if it was shown at all)."""
+        if self._timer is not None:
+            self._timer.cancel()
         with self._lock:
             if self._closed:
                 return
             self._closed = True
-            if self.active and self._drawn:
-                self._draw()
-                self._write("\n")
+            if self._bar is not None and self._shown:
+                self._bar.stop()
 
-    @property
-    def elapsed(self) -> float:
-        return time.perf_counter() - self.start
-
-    def line(self, width: int | None = None) -> str:
-        """The text of the line as it would be drawn now, at most ``width - 1`` characters."""
-        if width is None:
-            width = shutil.get_terminal_size(fallback=(80, 24)).columns
-        elapsed = self.elapsed
-        head = f"{self.desc} " if self.desc else ""
-        unit = f" {self.unit}" if self.unit else ""
-        tail = f"  {self.postfix}" if self.postfix else ""
-        if self.total:
-            fraction = min(max(self.done / self.total, 0.0), 1.0)
-            if self.done >= self.total:
-                eta = 0.0
-            elif self.done > 0:
-                eta = elapsed / self.done * (self.total - self.done)
-            else:
-                eta = math.nan
-            percent = f"{100 * fraction:3.0f}%"
-            count = f" {self.done}/{self.total}{unit} [{format_duration(elapsed)}<{format_duration(eta)}]"
-            room = width - 1 - len(head) - len(percent) - len(count) - len(tail) - 2
-            size = max(min(room, 30), 5)
-            filled = int(size * fraction)
-            text = f"{head}{percent}|{'#' * filled}{'-' * (size - filled)}|{count}{tail}"
-        else:
-            text = f"{head}{self.done}{unit} [{format_duration(elapsed)}]{tail}"
-        return text[: max(width - 1, 1)]
+    def _show(self) -> None:
+        with self._lock:
+            if self._closed or self._bar is None:
+                return
+            self._bar.start()
+            self._shown = True
 
     def __enter__(self) -> "Progress":
         return self
 
     def __exit__(self, *exc: Any) -> None:
         self.close()
-
-    # -- drawing ------------------------------------------------------------------------
-
-    def _tick(self, interval: float) -> None:
-        while not self._stop.wait(interval):
-            self.refresh()
-
-    def _maybe_draw(self) -> None:
-        if self._closed:
-            return
-        now = time.perf_counter()
-        if now - self.start < self.delay:
-            return
-        finished = self.total is not None and self.done >= self.total
-        if now - self._last_draw < MIN_INTERVAL and not finished:
-            return
-        self._draw()
-
-    def _draw(self) -> None:
-        text = self.line()
-        pad = " " * max(self._width - len(text), 0)
-        self._width = len(text)
-        self._last_draw = time.perf_counter()
-        self._drawn = True
-        self._write("\r" + text + pad)
-
-    def _write(self, text: str) -> None:
-        try:
-            self.stream.write(text)
-            self.stream.flush()
-        except (OSError, ValueError, AttributeError):  # closed or broken stream: stop drawing
-            self.active = False
-

@@ -21,6 +21,7 @@ import warnings
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any
 
+from ._text import plural
 from ._validate import Range, positive_int, positive_scalar
 
 __all__ = ["SolveOptions", "SolveReport", "MERITS"]
@@ -39,7 +40,7 @@ def _option(default: Any, doc: str, valid: Range, integer: bool = False) -> Any:
 class SolveOptions:
     """Options of Newton's method for a static solve.
 
-    Parameters
+    Attributes
     ----------
     tolerance
         Relative residual norm (residual over load norm) at which Newton stops, > 0.
@@ -185,8 +186,8 @@ class SolveReport:
         """A few human-readable lines."""
         status = "converged" if self.converged else "did NOT converge"
         lines = [
-            f"Newton {status} in {self.iterations} iterations "
-            f"({self.load_steps} load steps, {self.cutbacks} cutbacks), "
+            f"Newton {status} in {plural(self.iterations, 'iteration')} "
+            f"({plural(self.load_steps, 'load step')}, {plural(self.cutbacks, 'cutback')}), "
             f"relative residual {self.residual_norm:.3e}"
         ]
         if self.timings:

@@ -24,10 +24,12 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._text import plural
 from ._validate import as_finite, describe, real
 from .body import Body
 from .cables import DEFAULT_ALPHA_STEP, MAX_HALVINGS, Cable, cable_index, check_actuation, placement_counts
 from .errors import ConvergenceError, InputError, ParameterError
+from .io import result_mesh
 from .progress import Progress
 from .solver import SolveOptions, SolveReport
 
@@ -177,6 +179,42 @@ class StaticResult:
             "report": self.report.to_dict(),
         }
 
+    def to_meshio(self, points: str = "rest") -> Any:
+        """The result as a :class:`meshio.Mesh` (what ``result.vtu`` holds): the rest points
+        (``points="deformed"``: the deformed ones), point data ``displacement`` (m) and
+        ``pressure`` (Pa, mixed formulation), cell data ``J`` and ``von_mises`` (Pa).
+
+        Examples
+        --------
+        >>> mesh = result.to_meshio()                                 # doctest: +SKIP
+        >>> mesh.write("result.xdmf")                                 # doctest: +SKIP
+        """
+        return result_mesh(self, points=points)
+
+    def to_pyvista(self, points: str = "rest") -> Any:
+        """The result as a :class:`pyvista.UnstructuredGrid` (through :meth:`to_meshio`), for
+        plotting in Python; ``grid.warp_by_vector("displacement")`` gives the deformed body.
+        PyVista is optional: ``pip install pyvista`` (or the extra: ``pip install ".[pyvista]"``).
+
+        Raises
+        ------
+        ImportError
+            PyVista is not installed (the message says how to install it).
+
+        Examples
+        --------
+        >>> grid = result.to_pyvista()                                # doctest: +SKIP
+        >>> grid.warp_by_vector("displacement").plot(scalars="von_mises")   # doctest: +SKIP
+        """
+        try:
+            import pyvista
+        except ModuleNotFoundError as exc:
+            if exc.name != "pyvista":
+                raise
+            raise ImportError("StaticResult.to_pyvista needs PyVista, which is not installed: pip install pyvista "
+                              "(or use StaticResult.to_meshio(), which needs nothing more)") from None
+        return pyvista.from_meshio(self.to_meshio(points))
+
     def _cables_dict(self) -> dict[str, Any]:
         """``{"cables": [...]}`` (tensions, actuation, point placements) when the body has cables."""
         if not self.body.cables:
@@ -287,8 +325,8 @@ def solve_static(
                 err.report = SolveReport.from_dict(err.report, body.formulation)
             raise
         report = SolveReport.from_dict(out, body.formulation)
-        bar.set(1, postfix=f"{report.iterations} Newton iterations, {report.load_steps} load step(s), "
-                           f"{report.cutbacks} cut-back(s)")
+        bar.set(1, postfix=f"{plural(report.iterations, 'Newton iteration')}, {plural(report.load_steps, 'load step')}, "
+                           f"{plural(report.cutbacks, 'cutback')}")
     positions = out["positions"]
     return StaticResult(
         body, positions, out.get("pressure"), report, reactions=out.get("reactions"),

@@ -46,7 +46,12 @@ pub enum Error {
         message: String,
         report: Box<SolveReport>,
     },
-    /// The sparse factorisation failed for a reason other than indefiniteness.
+    /// A linear solve is impossible: the sparse analysis or factorisation failed (out of
+    /// memory, a bad elimination order), or a matrix that must be definite is not: the
+    /// projected Hessian in Newton (a body free to move rigidly, a free cable node held by no
+    /// taut segment) or the Hessian at an equilibrium for sensitivities (an unstable one).
+    /// An indefinite exact Hessian during Newton is no error: Newton falls back to the
+    /// projected one.
     LinearSolver { message: String },
 }
 

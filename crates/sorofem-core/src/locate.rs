@@ -107,9 +107,11 @@ impl<'a> PointLocator<'a> {
     /// `None` when no tet lies within the search radius.
     pub fn locate(&self, p: [f64; 3], search_radius: f64) -> Option<Location> {
         let p = Vector3::from(p);
-        let inside_tolerance = -1e-10;
+        let inside_tolerance = -crate::tolerance::INSIDE_TET;
         let mut best: Option<Location> = None;
-        let reach = (search_radius / self.cell).ceil() as isize;
+        // Rings beyond the grid hold no cell: a huge radius must not loop over them.
+        let widest = self.dims.iter().copied().max().unwrap_or(1) as f64;
+        let reach = (search_radius / self.cell).ceil().min(widest) as isize;
         let center = self.cell_of(&p);
         for ring in 0..=reach.max(0) {
             for dk in -ring..=ring {
@@ -163,6 +165,28 @@ impl<'a> PointLocator<'a> {
         }
         best
     }
+}
+
+/// Locates each of `points` (m) in `mesh` with one [`PointLocator`]: `None` for a point farther
+/// than `search_radius` (m) from every tet.
+pub fn locate_points(
+    mesh: &TetMesh,
+    points: &[[f64; 3]],
+    search_radius: f64,
+) -> crate::error::Result<Vec<Option<Location>>> {
+    crate::error::check_finite("points", points.as_flattened())?;
+    if !(search_radius >= 0.0 && search_radius.is_finite()) {
+        return Err(crate::error::Error::invalid(
+            "search_radius",
+            "a finite distance >= 0 m",
+            search_radius,
+        ));
+    }
+    let locator = PointLocator::new(mesh);
+    Ok(points
+        .iter()
+        .map(|&p| locator.locate(p, search_radius))
+        .collect())
 }
 
 /// Barycentric coordinates `(u, v, w)` (>= 0, sum 1) of the point of triangle `abc` closest to
@@ -224,6 +248,23 @@ mod tests {
         TetMesh::try_new(points, &[[0, 1, 2, 3]], Orientation::Reorient)
             .unwrap()
             .0
+    }
+
+    /// A search radius far beyond the mesh searched ring after ring of the grid past its end
+    /// (`isize::MAX` rings for an infinite-looking radius): the rings stop at the grid's edge.
+    #[test]
+    fn a_huge_search_radius_stops_at_the_grid() {
+        let mesh = unit_tet();
+        let hit = super::locate_points(&mesh, &[[10.0, 10.0, 10.0]], 1e300).unwrap();
+        let hit = hit[0].as_ref().expect("the tet is within the radius");
+        // The closest point is the centre (1/3, 1/3, 1/3) of the slanted face.
+        let expected = 3f64.sqrt() * (10.0 - 1.0 / 3.0);
+        assert!((hit.distance - expected).abs() < 1e-12, "{hit:?}");
+        assert!(hit
+            .weights
+            .iter()
+            .skip(1)
+            .all(|w| (w - 1.0 / 3.0).abs() < 1e-12));
     }
 
     #[test]

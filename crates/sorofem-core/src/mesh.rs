@@ -1,6 +1,7 @@
 //! Tetrahedral meshes: validated rest geometry, per-element shape gradients, boundary and queries.
 
 use crate::error::{check_finite, Error, Result};
+use crate::tolerance::DEGENERATE_TET_VOLUME;
 use nalgebra::{Matrix3, Vector3};
 use std::collections::HashMap;
 
@@ -25,9 +26,6 @@ pub struct TetMesh {
     /// Gradients of the four linear shape functions of each tet, in 1/m: F = sum_a x_a (x) g_a.
     shape_gradients: Vec<[Vector3<f64>; 4]>,
 }
-
-/// Tets thinner than this fraction of (longest edge)^3 count as degenerate; a regular tet has 0.118.
-const DEGENERACY_RATIO: f64 = 1e-12;
 
 fn signed_volume(p: &[[f64; 3]], t: &[usize; 4]) -> f64 {
     let d = |a: usize| Vector3::from(p[t[a]]) - Vector3::from(p[t[0]]);
@@ -66,7 +64,14 @@ impl TetMesh {
         }
         check_finite("points", rest.as_flattened())?;
         let n = rest.len();
-        let mut tets = Vec::with_capacity(tets_in.len());
+        let m = tets_in.len();
+        let (mut tets, mut volumes, mut shape_gradients) = (
+            Vec::with_capacity(m),
+            Vec::with_capacity(m),
+            Vec::with_capacity(m),
+        );
+        let mut reoriented = Vec::new();
+        // One pass: indices, distinct nodes, volume, orientation, shape gradients.
         for (e, t) in tets_in.iter().enumerate() {
             let mut tet = [0usize; 4];
             for a in 0..4 {
@@ -80,24 +85,15 @@ impl TetMesh {
                 }
                 tet[a] = t[a] as usize;
             }
-            for a in 0..4 {
-                for b in a + 1..4 {
-                    if tet[a] == tet[b] {
-                        return Err(Error::DegenerateTet {
-                            tet: e,
-                            volume: 0.0,
-                            threshold: 0.0,
-                        });
-                    }
-                }
+            if (0..4).any(|a| (a + 1..4).any(|b| tet[a] == tet[b])) {
+                return Err(Error::DegenerateTet {
+                    tet: e,
+                    volume: 0.0,
+                    threshold: 0.0,
+                });
             }
-            tets.push(tet);
-        }
-        let mut reoriented = Vec::new();
-        let mut volumes = Vec::with_capacity(tets.len());
-        for (e, tet) in tets.iter_mut().enumerate() {
-            let mut volume = signed_volume(&rest, tet);
-            let threshold = DEGENERACY_RATIO * longest_edge(&rest, tet).powi(3);
+            let mut volume = signed_volume(&rest, &tet);
+            let threshold = DEGENERATE_TET_VOLUME * longest_edge(&rest, &tet).powi(3);
             if volume.abs() <= threshold {
                 return Err(Error::DegenerateTet {
                     tet: e,
@@ -115,21 +111,17 @@ impl TetMesh {
                     }
                 }
             }
+            let d = |a: usize| Vector3::from(rest[tet[a]]) - Vector3::from(rest[tet[0]]);
+            let dm = Matrix3::from_columns(&[d(1), d(2), d(3)]);
+            // Non-degeneracy was checked above, so the inverse exists.
+            let dm_inv = dm.try_inverse().expect("non-degenerate tetrahedron");
+            let g1 = dm_inv.row(0).transpose();
+            let g2 = dm_inv.row(1).transpose();
+            let g3 = dm_inv.row(2).transpose();
+            shape_gradients.push([-(g1 + g2 + g3), g1, g2, g3]);
+            tets.push(tet);
             volumes.push(volume);
         }
-        let shape_gradients = tets
-            .iter()
-            .map(|t| {
-                let d = |a: usize| Vector3::from(rest[t[a]]) - Vector3::from(rest[t[0]]);
-                let dm = Matrix3::from_columns(&[d(1), d(2), d(3)]);
-                // Non-degeneracy was checked above, so the inverse exists.
-                let dm_inv = dm.try_inverse().expect("non-degenerate tetrahedron");
-                let g1 = dm_inv.row(0).transpose();
-                let g2 = dm_inv.row(1).transpose();
-                let g3 = dm_inv.row(2).transpose();
-                [-(g1 + g2 + g3), g1, g2, g3]
-            })
-            .collect();
         Ok((
             TetMesh {
                 rest,
@@ -268,12 +260,18 @@ impl TetMesh {
         f
     }
 
-    /// Boundary triangles (faces belonging to exactly one tet), oriented with outward normals.
+    /// Boundary triangles (faces belonging to exactly one tet), oriented with outward normals,
+    /// sorted.
     pub fn boundary_faces(&self) -> Vec<[usize; 3]> {
+        self.boundary().into_iter().map(|(face, _)| face).collect()
+    }
+
+    /// [`TetMesh::boundary_faces`] with the tet each face belongs to.
+    pub fn boundary(&self) -> Vec<([usize; 3], usize)> {
         // Outward faces of a positively oriented tet (0, 1, 2, 3).
         const FACES: [[usize; 3]; 4] = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]];
-        let mut count: HashMap<[usize; 3], (usize, [usize; 3])> = HashMap::new();
-        for tet in &self.tets {
+        let mut count: HashMap<[usize; 3], (usize, [usize; 3], usize)> = HashMap::new();
+        for (e, tet) in self.tets.iter().enumerate() {
             for face in FACES {
                 let oriented = [tet[face[0]], tet[face[1]], tet[face[2]]];
                 let mut key = oriented;
@@ -281,16 +279,30 @@ impl TetMesh {
                 count
                     .entry(key)
                     .and_modify(|c| c.0 += 1)
-                    .or_insert((1, oriented));
+                    .or_insert((1, oriented, e));
             }
         }
-        let mut faces: Vec<[usize; 3]> = count
+        let mut faces: Vec<([usize; 3], usize)> = count
             .into_values()
-            .filter(|(c, _)| *c == 1)
-            .map(|(_, f)| f)
+            .filter(|(c, _, _)| *c == 1)
+            .map(|(_, face, owner)| (face, owner))
             .collect();
         faces.sort_unstable();
         faces
+    }
+
+    /// Checks the corners of a query box: finite, `min <= max` componentwise.
+    pub fn check_box(min: [f64; 3], max: [f64; 3]) -> Result<()> {
+        check_finite("min", &min)?;
+        check_finite("max", &max)?;
+        if (0..3).any(|a| min[a] > max[a]) {
+            return Err(Error::invalid(
+                "min, max",
+                "min <= max componentwise",
+                format!("{min:?} and {max:?}"),
+            ));
+        }
+        Ok(())
     }
 
     /// Nodes with `min <= x <= max` componentwise, in increasing order.
@@ -298,13 +310,16 @@ impl TetMesh {
         self.nodes_where(|p| (0..3).all(|a| p[a] >= min[a] && p[a] <= max[a]))
     }
 
-    /// Nodes within `tolerance` (m) of the plane through `point` with normal `normal`.
+    /// Nodes within `tolerance * diameter()` of the plane through `point` with normal `normal`
+    /// (any non-zero length): the tolerance is relative to the mesh size, so the same value
+    /// works in metres and millimetres ([`crate::tolerance::ON_PLANE`] is the usual one).
     pub fn nodes_on_plane(
         &self,
         point: [f64; 3],
         normal: [f64; 3],
         tolerance: f64,
     ) -> Result<Vec<usize>> {
+        check_finite("point", &point)?;
         let n = Vector3::from(normal);
         let len = n.norm();
         if !(len > 0.0 && len.is_finite()) {
@@ -314,9 +329,17 @@ impl TetMesh {
                 format!("{normal:?}"),
             ));
         }
+        if !(tolerance >= 0.0 && tolerance.is_finite()) {
+            return Err(Error::invalid(
+                "tolerance",
+                "a finite tolerance >= 0 (relative to the mesh size)",
+                tolerance,
+            ));
+        }
         let n = n / len;
         let p0 = Vector3::from(point);
-        Ok(self.nodes_where(|p| (Vector3::from(*p) - p0).dot(&n).abs() <= tolerance))
+        let distance = tolerance * self.diameter();
+        Ok(self.nodes_where(|p| (Vector3::from(*p) - p0).dot(&n).abs() <= distance))
     }
 
     pub fn nodes_where(&self, predicate: impl Fn(&[f64; 3]) -> bool) -> Vec<usize> {
@@ -363,5 +386,29 @@ mod tests {
         assert!((enclosed - 0.004).abs() < 1e-14);
         // Surface of an 8x2x2 grid: 2*(8*2 + 8*2 + 2*2) quads, 2 triangles each.
         assert_eq!(faces.len(), 2 * 2 * (16 + 16 + 4));
+        // Each face's owner has all three of its nodes.
+        for (face, owner) in mesh.boundary() {
+            assert!(face.iter().all(|i| mesh.tets()[owner].contains(i)));
+        }
+    }
+
+    #[test]
+    fn nodes_on_plane_take_a_tolerance_relative_to_the_mesh_size() {
+        // The same box in metres and in millimetres gives the same nodes.
+        for scale in [1.0, 1e3] {
+            let mesh =
+                TetMesh::box_mesh([0.4 * scale, 0.1 * scale, 0.1 * scale], [8, 2, 2], [0.0; 3])
+                    .unwrap();
+            let end = mesh.nodes_on_plane([0.4 * scale, 0.0, 0.0], [2.0, 0.0, 0.0], 1e-9);
+            assert_eq!(end.unwrap().len(), 9);
+            // A plane 0.5 % of the diagonal (0.42 m) away from the first cross-section at x = 0.05.
+            let near = mesh.nodes_on_plane([0.052 * scale, 0.0, 0.0], [1.0, 0.0, 0.0], 5e-3);
+            assert_eq!(near.unwrap().len(), 9);
+        }
+        let mesh = TetMesh::box_mesh([1.0; 3], [1, 1, 1], [0.0; 3]).unwrap();
+        assert!(mesh.nodes_on_plane([0.0; 3], [0.0; 3], 1e-9).is_err());
+        assert!(mesh
+            .nodes_on_plane([0.0; 3], [1.0, 0.0, 0.0], -1.0)
+            .is_err());
     }
 }

@@ -10,7 +10,7 @@ use crate::report::{SolveReport, Timings};
 use std::time::Instant;
 
 /// Newton settings.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct NewtonOptions {
     /// Stop when `||g|| <= tolerance * reference` (relative residual).
     pub tolerance: f64,
@@ -23,10 +23,38 @@ pub struct NewtonOptions {
     /// Standard formulation: Hessians take their volumetric stiffness at element pressure
     /// iterates (Newton's method on the element-wise perturbed-Lagrangian form of the same
     /// energy; see [`crate::energy::ElasticTerm::advance_pressures`]) rather than at
-    /// `lambda c(J)`. Same solution, quadratic convergence, and far fewer iterations when the
-    /// body rotates: the 0.4 m cantilever at 8x2x2 cells takes 10 instead of 13, the 1 m one
-    /// at 48x8x8 cells 12 instead of 18. `false`: the exact Hessian of the energy.
+    /// `kappa c(J)`. Same solution, quadratic convergence, and fewer iterations when the body
+    /// rotates (docs/theory.md, "Newton's method", has the counts). `false`: the exact Hessian
+    /// of the energy.
     pub pressure_iterates: bool,
+}
+
+impl NewtonOptions {
+    /// Checks every setting; the error names the first bad one.
+    pub fn validate(&self) -> Result<()> {
+        if !(self.tolerance > 0.0 && self.tolerance.is_finite()) {
+            return Err(Error::invalid(
+                "tolerance",
+                "a finite relative residual > 0",
+                self.tolerance,
+            ));
+        }
+        if self.max_iterations == 0 {
+            return Err(Error::invalid(
+                "max_iterations",
+                "at least 1 Newton iteration per load step",
+                self.max_iterations,
+            ));
+        }
+        if self.load_steps == 0 {
+            return Err(Error::invalid(
+                "load_steps",
+                "at least 1 load step",
+                self.load_steps,
+            ));
+        }
+        Ok(())
+    }
 }
 
 impl Default for NewtonOptions {
@@ -140,16 +168,7 @@ pub fn solve(
 ) -> Result<SolveReport> {
     let start = Instant::now();
     let mut report = SolveReport::default();
-    if !(options.tolerance > 0.0) || options.max_iterations == 0 || options.load_steps == 0 {
-        return Err(Error::invalid(
-            "options",
-            "tolerance > 0, max_iterations >= 1 and load_steps >= 1",
-            format!(
-                "tolerance {}, max_iterations {}, load_steps {}",
-                options.tolerance, options.max_iterations, options.load_steps
-            ),
-        ));
-    }
+    options.validate()?;
     let mut reached = 0.0;
     let mut increment = 1.0 / options.load_steps as f64;
     while reached < 1.0 {
@@ -223,10 +242,9 @@ fn newton_step(
     let start_merit = energy;
     // Whether the next iteration tries the exact Hessian first. Once the exact Hessian has been
     // indefinite, the iterations stay with the projected one until a full step matches its
-    // quadratic model (energy merits only: a residual merit's decrease is not that model's); trying the exact one at every iterate of a large-rotation phase costs
-    // an assembly and a failed factorisation each time for the same steps (with the exact
-    // Hessian of the energy, without pressure iterates, the 1 m cantilever at 48x8x8 cells
-    // failed 11 of 19).
+    // quadratic model (energy merits only: a residual merit's decrease is not that model's):
+    // trying the exact one at every iterate of a large-rotation phase costs an assembly and a
+    // failed factorisation each time for the same steps.
     let mut exact_next = true;
     // Whether the full-step trial also assembles the Hessian there (see below).
     let mut prepare_next = false;
@@ -258,24 +276,21 @@ fn newton_step(
         let slope = merit.slope(&g, &d);
         // The largest merit of the last five iterates (and of this one), for the non-monotone
         // Armijo test of Grippo, Lampariello and Lucidi (1986): a trial must fall below it by the
-        // Armijo decrease, not below the current merit. Large-rotation problems need this: with
-        // the plain Armijo test the hammerbot takes 17 Newton iterations instead of 14, the
-        // 0.4 m cantilever at 32x8x8 cells 16 instead of 12, the 1 m one at 8x2x2 16 instead of 14.
+        // Armijo decrease, not below the current merit, because the plain Armijo test cuts the
+        // long rotating steps of large-rotation problems.
         let window_max = report
             .energy_history
             .iter()
             .rev()
             .take(5)
             .fold(energy, |m, &e| m.max(e));
-        // Try the full Newton step first (unless bounded, below). Starting from twice the last accepted step
-        // saves rejected trials (cheap energy evaluations) but costs Newton iterations (a
-        // factorisation each): 15 -> 14 on the hammerbot, 20 -> 16 and 24 -> 19 on the 1 m
-        // cantilevers at 16x4x4 and 48x8x8 cells.
+        // Try the full Newton step first (unless bounded, below): starting from twice the last
+        // accepted step saves rejected trials (cheap merit evaluations) but costs Newton
+        // iterations (a factorisation each).
         //
         // Steps the problem bounds (a node moved farther than the body is large) start at the
         // largest power of two within the bound: the halving would reject the longer ones one
-        // by one (seven trials in the first iteration of the 1 m cantilever at 48x8x8 cells,
-        // whose linear step moves its tip 24 m).
+        // by one.
         let bound = problem.step_bound(&d);
         let mut t: f64 = 1.0;
         while t > bound && t > 1e-12 {
@@ -301,9 +316,8 @@ fn newton_step(
             if e_trial.is_finite() {
                 let factor = merit.nonmonotone_factor();
                 // The factor test may not compound from window to window: never above factor^2
-                // times the load step's starting merit. Without that cap the mixed 1 m
-                // cantilever (20x2x2 Kuhn cells, 10 load steps) let its residual grow 1e5-fold in
-                // its first load step and needed 150 iterations and a cut-back instead of 59.
+                // times the load step's starting merit, or the residual can grow window after
+                // window (tests/regression_mixed_residual_growth.rs).
                 if e_trial <= window_max + 1e-4 * t * slope
                     || (factor > 0.0
                         && e_trial <= factor * window_max

@@ -116,6 +116,30 @@ impl ParamLayout {
     }
 }
 
+/// Terms with fewer elements run their loops on the calling thread: a parallel region costs
+/// more than the work (waking the pool's threads, tens of microseconds on a busy machine).
+const PARALLEL_FROM_ELEMENTS: usize = 2048;
+
+/// Runs `body(scratch, (e, out))` for every element `e` of `term`, `out` the e-th chunk of
+/// `outputs` (`chunk` values each): in parallel for large terms, each thread with its own
+/// [`ElementScratch`].
+fn for_each_element<T: Send>(
+    term: &dyn ParamTerm,
+    outputs: &mut [T],
+    chunk: usize,
+    body: impl Fn(&mut ElementScratch, (usize, &mut [T])) + Sync,
+) {
+    if term.n_elements() >= PARALLEL_FROM_ELEMENTS {
+        (outputs.par_chunks_mut(chunk).enumerate())
+            .for_each_init(|| ElementScratch::new(term), |s, item| body(s, item));
+    } else {
+        let mut scratch = ElementScratch::new(term);
+        for item in outputs.chunks_mut(chunk).enumerate() {
+            body(&mut scratch, item);
+        }
+    }
+}
+
 /// Per-thread buffers of one term's element loop.
 struct ElementScratch {
     dofs: Vec<usize>,
@@ -187,7 +211,8 @@ impl Model {
     }
 
     /// `w . dr/dtheta` for every parameter, from a full-DOF vector `w` (zeros on fixed DOFs).
-    /// The element kernels run in parallel; their values are summed in element order.
+    /// The element kernels run in parallel (large terms); their values are summed in element
+    /// order.
     fn contract_param_derivatives(&self, w: &[f64]) -> ParamVector {
         let (z, loads) = self.last_state.as_ref().expect("prepared");
         let load_terms = self.terms.loads(loads);
@@ -200,19 +225,16 @@ impl Model {
                 continue;
             }
             let mut contributions = vec![(0usize, 0.0f64); term.n_elements() * k];
-            contributions.par_chunks_mut(k).enumerate().for_each_init(
-                || ElementScratch::new(*term),
-                |scratch, (e, out)| {
-                    scratch.gather(*term, e, z);
-                    term.element_param_gradient(e, &scratch.local, &mut scratch.gradient);
-                    for (j, slot) in out.iter_mut().enumerate() {
-                        let (block, index) = scratch.params[j];
-                        let row = &scratch.gradient[j * s..(j + 1) * s];
-                        let value = row.iter().zip(&scratch.dofs).map(|(g, &d)| g * w[d]).sum();
-                        *slot = (offsets[block] + index, value);
-                    }
-                },
-            );
+            for_each_element(*term, &mut contributions, k, |scratch, (e, out)| {
+                scratch.gather(*term, e, z);
+                term.element_param_gradient(e, &scratch.local, &mut scratch.gradient);
+                for (j, slot) in out.iter_mut().enumerate() {
+                    let (block, index) = scratch.params[j];
+                    let row = &scratch.gradient[j * s..(j + 1) * s];
+                    let value = row.iter().zip(&scratch.dofs).map(|(g, &d)| g * w[d]).sum();
+                    *slot = (offsets[block] + index, value);
+                }
+            });
             for (index, value) in contributions {
                 flat[index] += value;
             }
@@ -235,26 +257,22 @@ impl Model {
                 continue;
             }
             let mut local_out = vec![0.0; term.n_elements() * s];
-            local_out.par_chunks_mut(s).enumerate().for_each_init(
-                || ElementScratch::new(*term),
-                |scratch, (e, out)| {
-                    scratch.gather(*term, e, z);
-                    for (weight, &(block, index)) in scratch.weights.iter_mut().zip(&scratch.params)
-                    {
-                        *weight = delta[offsets[block] + index];
+            for_each_element(*term, &mut local_out, s, |scratch, (e, out)| {
+                scratch.gather(*term, e, z);
+                for (weight, &(block, index)) in scratch.weights.iter_mut().zip(&scratch.params) {
+                    *weight = delta[offsets[block] + index];
+                }
+                out.fill(0.0);
+                if scratch.weights.iter().all(|&v| v == 0.0) {
+                    return;
+                }
+                term.element_param_gradient(e, &scratch.local, &mut scratch.gradient);
+                for (j, &weight) in scratch.weights.iter().enumerate() {
+                    for (o, g) in out.iter_mut().zip(&scratch.gradient[j * s..(j + 1) * s]) {
+                        *o += weight * g;
                     }
-                    out.fill(0.0);
-                    if scratch.weights.iter().all(|&v| v == 0.0) {
-                        return;
-                    }
-                    term.element_param_gradient(e, &scratch.local, &mut scratch.gradient);
-                    for (j, &weight) in scratch.weights.iter().enumerate() {
-                        for (o, g) in out.iter_mut().zip(&scratch.gradient[j * s..(j + 1) * s]) {
-                            *o += weight * g;
-                        }
-                    }
-                },
-            );
+                }
+            });
             let mut dofs = vec![0; s];
             for (e, values) in local_out.chunks(s).enumerate() {
                 term.element_dofs(e, &mut dofs);

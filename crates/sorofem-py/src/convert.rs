@@ -5,20 +5,19 @@ use numpy::{
     PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
-use sorofem_core::Error;
-
-fn shape_error(param: &str, expected: &str, given: String) -> Error {
-    Error::shape(param, expected, given)
-}
+use pyo3::types::{PyDict, PyDictMethods};
+use sorofem_core::material::{MaterialModel, Volumetric};
+use sorofem_core::Loads;
+use sorofem_core::{Error, Orientation, PressureMass};
 
 /// An `(n, 3)` float64 array as node-major triples.
 pub fn points(param: &str, array: &Bound<'_, PyAny>) -> Result<Vec<[f64; 3]>, Error> {
     let array: PyReadonlyArray2<f64> = array
         .extract()
-        .map_err(|_| shape_error(param, "a float64 array of shape (n, 3)", describe(array)))?;
+        .map_err(|_| Error::shape(param, "a float64 array of shape (n, 3)", describe(array)))?;
     let shape = array.shape();
     if shape[1] != 3 {
-        return Err(shape_error(
+        return Err(Error::shape(
             param,
             "shape (n, 3)",
             format!("shape ({}, {})", shape[0], shape[1]),
@@ -36,10 +35,10 @@ pub fn points(param: &str, array: &Bound<'_, PyAny>) -> Result<Vec<[f64; 3]>, Er
 pub fn tets(param: &str, array: &Bound<'_, PyAny>) -> Result<Vec<[i64; 4]>, Error> {
     let array: PyReadonlyArray2<i64> = array
         .extract()
-        .map_err(|_| shape_error(param, "an int64 array of shape (m, 4)", describe(array)))?;
+        .map_err(|_| Error::shape(param, "an int64 array of shape (m, 4)", describe(array)))?;
     let shape = array.shape();
     if shape[1] != 4 {
-        return Err(shape_error(
+        return Err(Error::shape(
             param,
             "shape (m, 4)",
             format!("shape ({}, {})", shape[0], shape[1]),
@@ -61,11 +60,11 @@ pub fn vector(
 ) -> Result<Vec<f64>, Error> {
     let array: PyReadonlyArray1<f64> = array
         .extract()
-        .map_err(|_| shape_error(param, "a 1-d float64 array", describe(array)))?;
+        .map_err(|_| Error::shape(param, "a 1-d float64 array", describe(array)))?;
     let values = array.as_array().to_vec();
     if let Some(len) = len {
         if values.len() != len {
-            return Err(shape_error(
+            return Err(Error::shape(
                 param,
                 &format!("shape ({len},)"),
                 format!("shape ({},)", values.len()),
@@ -83,11 +82,11 @@ pub fn matrix(
 ) -> Result<Vec<Vec<f64>>, Error> {
     let array: PyReadonlyArray2<f64> = array
         .extract()
-        .map_err(|_| shape_error(param, "a 2-d float64 array", describe(array)))?;
+        .map_err(|_| Error::shape(param, "a 2-d float64 array", describe(array)))?;
     let shape = array.shape();
     if let Some(cols) = cols {
         if shape[1] != cols {
-            return Err(shape_error(
+            return Err(Error::shape(
                 param,
                 &format!("shape (steps, {cols})"),
                 format!("shape ({}, {})", shape[0], shape[1]),
@@ -106,7 +105,7 @@ pub fn matrix(
 pub fn indices(param: &str, array: &Bound<'_, PyAny>) -> Result<Vec<i64>, Error> {
     let array: PyReadonlyArray1<i64> = array
         .extract()
-        .map_err(|_| shape_error(param, "a 1-d int64 array", describe(array)))?;
+        .map_err(|_| Error::shape(param, "a 1-d int64 array", describe(array)))?;
     Ok(array.as_array().to_vec())
 }
 
@@ -116,7 +115,7 @@ pub fn vec3(param: &str, array: &Bound<'_, PyAny>) -> Result<[f64; 3], Error> {
     Ok([v[0], v[1], v[2]])
 }
 
-fn describe(object: &Bound<'_, PyAny>) -> String {
+pub fn describe(object: &Bound<'_, PyAny>) -> String {
     let shape = object.getattr("shape").ok().map(|s| s.to_string());
     let dtype = object.getattr("dtype").ok().map(|s| s.to_string());
     match (shape, dtype) {
@@ -210,10 +209,9 @@ pub fn cable_spec(
 /// the material's parameters also inside a `"material"` dict, and the original keys "mu", "lam"
 /// and "rho". Blocks left out are zero.
 pub fn param_direction(
-    direction: &Bound<'_, pyo3::types::PyDict>,
+    direction: &Bound<'_, PyDict>,
     zeros: &sorofem_core::sensitivity::ParamVector,
 ) -> Result<sorofem_core::sensitivity::ParamVector, Error> {
-    use pyo3::types::PyDictMethods;
     let mut delta = zeros.clone();
     let known: Vec<&str> = zeros.blocks.iter().map(|(n, _)| n.as_str()).collect();
     let mut set = |key: &str, name: &str, value: &Bound<'_, PyAny>| -> Result<(), Error> {
@@ -235,7 +233,7 @@ pub fn param_direction(
             .extract()
             .map_err(|_| Error::invalid("direction", "string keys", key.to_string()))?;
         if key == "material" {
-            let inner = value.cast::<pyo3::types::PyDict>().map_err(|_| {
+            let inner = value.cast::<PyDict>().map_err(|_| {
                 Error::shape(
                     "direction[\"material\"]",
                     "a dict of per-tet arrays by parameter name",
@@ -260,32 +258,153 @@ pub fn param_direction(
     Ok(delta)
 }
 
-/// A material model by name, with its options: "neo_hookean" takes "volumetric" ("log" |
-/// "linear"; default `volumetric_default`, the model's constructor option), "ogden" takes
-/// "terms" (1 to 3, required), "mooney_rivlin" and "yeoh" take none. Unknown option keys are
-/// errors.
-pub fn material_model(
-    name: &str,
-    options: Option<&Bound<'_, pyo3::types::PyDict>>,
-    volumetric_default: sorofem_core::material::Volumetric,
-) -> Result<sorofem_core::material::MaterialModel, Error> {
-    use pyo3::types::PyDictMethods;
-    use sorofem_core::material::{MaterialModel, Volumetric};
-    let known: &[&str] = match name {
-        "neo_hookean" => &["volumetric"],
-        "ogden" => &["terms"],
-        "mooney_rivlin" | "yeoh" => &[],
-        other => {
-            return Err(Error::invalid(
-                "model",
-                "\"neo_hookean\", \"mooney_rivlin\", \"yeoh\" or \"ogden\"",
-                format!("{other:?}"),
+/// The inputs of the optional terms: `terms` is a dict by term name ("cables": a list of cable
+/// dicts, see [`cable_spec`]); `cables` is the constructor's original keyword for the same
+/// list (not both).
+pub fn term_specs(
+    terms: Option<&Bound<'_, PyDict>>,
+    cables: Option<&Bound<'_, pyo3::types::PyList>>,
+) -> Result<sorofem_core::TermSpecs, Error> {
+    let mut specs = sorofem_core::TermSpecs::default();
+    let cable_list =
+        |list: &Bound<'_, PyAny>| -> Result<Vec<sorofem_core::cables::CableSpec>, Error> {
+            let list = list
+                .cast::<pyo3::types::PyList>()
+                .map_err(|_| Error::shape("cables", "a list of cable dicts", describe(list)))?;
+            (list.iter().enumerate())
+                .map(|(c, item)| cable_spec(c, &item))
+                .collect()
+        };
+    if let Some(terms) = terms {
+        for (key, value) in terms.iter() {
+            match key.to_string().as_str() {
+                "cables" if cables.is_some() => {
+                    return Err(Error::invalid(
+                        "cables",
+                        "the cables either as the keyword or in terms, not both",
+                        "both",
+                    ))
+                }
+                "cables" => specs.cables = cable_list(&value)?,
+                other => {
+                    return Err(Error::invalid(
+                        "terms",
+                        "keys among [\"cables\"]",
+                        format!("{other:?}"),
+                    ))
+                }
+            }
+        }
+    }
+    if let Some(cables) = cables {
+        specs.cables = cable_list(cables.as_any())?;
+    }
+    Ok(specs)
+}
+
+/// One of `choices` (`(name, value)`), by name; `param` names the option in the error.
+fn choice<T: Copy>(param: &str, given: &str, choices: &[(&str, T)]) -> Result<T, Error> {
+    match choices.iter().find(|(name, _)| *name == given) {
+        Some(&(_, value)) => Ok(value),
+        None => {
+            let names: Vec<String> = choices.iter().map(|(n, _)| format!("{n:?}")).collect();
+            Err(Error::invalid(
+                param,
+                format!("one of {}", names.join(", ")),
+                format!("{given:?}"),
             ))
         }
+    }
+}
+
+pub fn orientation(name: &str) -> Result<Orientation, Error> {
+    choice(
+        "orientation",
+        name,
+        &[
+            ("reorient", Orientation::Reorient),
+            ("reject", Orientation::Reject),
+        ],
+    )
+}
+
+/// The volumetric measure: "log" (c = ln J) or "linear" (c = J - 1).
+pub fn volumetric(name: &str) -> Result<Volumetric, Error> {
+    choice(
+        "volumetric",
+        name,
+        &[("log", Volumetric::Log), ("linear", Volumetric::Linear)],
+    )
+}
+
+pub fn pressure_mass(name: &str) -> Result<PressureMass, Error> {
+    choice(
+        "pressure_mass",
+        name,
+        &[
+            ("consistent", PressureMass::Consistent),
+            ("lumped", PressureMass::Lumped),
+        ],
+    )
+}
+
+/// The formulation by name, with the pressure mass of the mixed one.
+pub fn formulation(name: &str, mass: PressureMass) -> Result<sorofem_core::Formulation, Error> {
+    use sorofem_core::Formulation;
+    choice(
+        "formulation",
+        name,
+        &[
+            ("standard", Formulation::Standard),
+            ("mixed", Formulation::Mixed { mass }),
+        ],
+    )
+}
+
+/// A string option of an options dict (`None` when absent).
+pub fn string_option(
+    options: Option<&Bound<'_, PyDict>>,
+    key: &str,
+) -> Result<Option<String>, Error> {
+    let Some(value) = options.and_then(|o| o.get_item(key).ok().flatten()) else {
+        return Ok(None);
     };
-    let mut given = std::collections::HashMap::new();
+    value
+        .extract::<String>()
+        .map(Some)
+        .map_err(|_| Error::shape(key, "a string", describe(&value)))
+}
+
+/// A material model by name, with its options: "neo_hookean" takes "volumetric" ("log" |
+/// "linear"; default `volumetric`, the model's constructor option), "ogden" takes "terms" (1 to
+/// 3, required); "mooney_rivlin" and "yeoh" take none. Unknown option keys are errors.
+pub fn material_model(
+    name: &str,
+    options: Option<&Bound<'_, PyDict>>,
+    volumetric_default: Volumetric,
+) -> Result<MaterialModel, Error> {
+    let model = choice(
+        "model",
+        name,
+        &[
+            (
+                "neo_hookean",
+                MaterialModel::NeoHookean {
+                    volumetric: volumetric_default,
+                },
+            ),
+            ("mooney_rivlin", MaterialModel::MooneyRivlin),
+            ("yeoh", MaterialModel::Yeoh),
+            ("ogden", MaterialModel::Ogden { terms: 0 }),
+        ],
+    )?;
+    let known: &[&str] = match model {
+        MaterialModel::NeoHookean { .. } => &["volumetric"],
+        MaterialModel::Ogden { .. } => &["terms"],
+        MaterialModel::MooneyRivlin | MaterialModel::Yeoh => &[],
+    };
     if let Some(options) = options {
-        for (key, value) in options.iter() {
+        for key in options.keys() {
             let key = key.to_string();
             if !known.contains(&key.as_str()) {
                 return Err(Error::invalid(
@@ -294,46 +413,34 @@ pub fn material_model(
                     format!("{key:?}"),
                 ));
             }
-            given.insert(key, value);
         }
     }
-    Ok(match name {
-        "neo_hookean" => MaterialModel::NeoHookean {
-            volumetric: match given.get("volumetric") {
+    Ok(match model {
+        MaterialModel::NeoHookean { .. } => MaterialModel::NeoHookean {
+            volumetric: match string_option(options, "volumetric")? {
+                Some(v) => volumetric(&v)?,
                 None => volumetric_default,
-                Some(v) => match v.extract::<String>().as_deref() {
-                    Ok("log") => Volumetric::Log,
-                    Ok("linear") => Volumetric::Linear,
-                    _ => {
-                        return Err(Error::invalid(
-                            "volumetric",
-                            "\"log\" (c = ln J) or \"linear\" (c = J - 1)",
-                            describe(v),
-                        ))
-                    }
-                },
             },
         },
-        "mooney_rivlin" => MaterialModel::MooneyRivlin,
-        "yeoh" => MaterialModel::Yeoh,
-        _ => {
-            let terms = given
-                .get("terms")
-                .ok_or_else(|| Error::invalid("terms", "1, 2 or 3 Ogden terms", "none"))?;
-            let terms: usize = terms
+        MaterialModel::Ogden { .. } => {
+            let expected = "1, 2 or 3 Ogden terms";
+            let terms = options
+                .and_then(|o| o.get_item("terms").ok().flatten())
+                .ok_or_else(|| Error::invalid("terms", expected, "none"))?;
+            let count: usize = terms
                 .extract()
-                .map_err(|_| Error::invalid("terms", "1, 2 or 3 Ogden terms", describe(terms)))?;
-            MaterialModel::ogden(terms)?
+                .map_err(|_| Error::invalid("terms", expected, describe(&terms)))?;
+            MaterialModel::ogden(count)?
         }
+        other => other,
     })
 }
 
 /// Material parameters from a dict of per-tet arrays (`(m,)` float64 each), by name.
 pub fn material_params(
-    params: &Bound<'_, pyo3::types::PyDict>,
+    params: &Bound<'_, PyDict>,
     n_tets: usize,
 ) -> Result<Vec<(String, Vec<f64>)>, Error> {
-    use pyo3::types::PyDictMethods;
     params
         .iter()
         .map(|(key, value)| {
@@ -344,4 +451,73 @@ pub fn material_params(
             Ok((name, values))
         })
         .collect()
+}
+
+/// Loads from numpy: gravity (3,), nodal forces (n, 3), prescribed displacements (k, 3).
+pub fn loads(
+    py: Python<'_>,
+    n: usize,
+    gravity: &Bound<'_, PyAny>,
+    forces: &Bound<'_, PyAny>,
+    prescribed: &Bound<'_, PyAny>,
+) -> PyResult<Loads> {
+    let gravity = vec3("gravity", gravity).map_err(|e| crate::errors::to_py(py, e))?;
+    let forces = points("forces", forces).map_err(|e| crate::errors::to_py(py, e))?;
+    if forces.len() != n {
+        return Err(crate::errors::to_py(
+            py,
+            sorofem_core::Error::shape(
+                "forces",
+                format!("({n}, 3)"),
+                format!("({}, 3)", forces.len()),
+            ),
+        ));
+    }
+    let nodal_forces = forces
+        .into_iter()
+        .enumerate()
+        .filter(|(_, f)| f.iter().any(|&v| v != 0.0))
+        .collect();
+    let prescribed = points("prescribed", prescribed).map_err(|e| crate::errors::to_py(py, e))?;
+    Ok(Loads {
+        gravity,
+        nodal_forces,
+        prescribed,
+    })
+}
+
+/// A parameter vector as a dict: `"material"` maps each material parameter name to its per-tet
+/// values, every other block sits under its own name ("density", "gravity", "cable_actuation",
+/// "cable_stiffness"), and the keys of the original API stay: "mu", "lam" (Neo-Hookean) and
+/// "rho" (density).
+pub fn param_vector_to_dict<'py>(
+    py: Python<'py>,
+    p: &sorofem_core::sensitivity::ParamVector,
+    material_names: &[String],
+) -> PyResult<Bound<'py, PyDict>> {
+    let out = PyDict::new(py);
+    let material = PyDict::new(py);
+    for (name, values) in &p.blocks {
+        let array = PyArray1::from_slice(py, values);
+        if material_names.contains(name) {
+            material.set_item(name, &array)?;
+        } else {
+            out.set_item(name, &array)?;
+        }
+        if let Some(alias) = legacy_param_key(name) {
+            out.set_item(alias, array)?;
+        }
+    }
+    out.set_item("material", material)?;
+    Ok(out)
+}
+
+/// The original API's key of a parameter block, where it had one.
+fn legacy_param_key(name: &str) -> Option<&'static str> {
+    match name {
+        "mu" => Some("mu"),
+        "lambda" => Some("lam"),
+        "density" => Some("rho"),
+        _ => None,
+    }
 }

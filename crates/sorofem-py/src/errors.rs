@@ -1,10 +1,14 @@
-//! The one mapping from the core's error enum onto the exception classes of `sorofem.errors`.
+//! The one mapping from the core's error enum (and from a panic, which would be a bug) onto the
+//! exception classes of `sorofem.errors`.
 
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::sync::PyOnceLock;
+use pyo3::types::{PyDict, PyTuple, PyType};
 use sorofem_core::{Error, SolveReport};
+use std::panic::{catch_unwind, AssertUnwindSafe};
 
-/// Converts a core error into the matching `sorofem.errors` exception.
+/// Converts a core error into the matching `sorofem.errors` exception. A `ParameterError`
+/// carries the parameter's name in `.parameter`; a `ConvergenceError` the report in `.report`.
 pub fn to_py(py: Python<'_>, error: Error) -> PyErr {
     let class = match &error {
         Error::Shape { .. } => "ShapeError",
@@ -17,7 +21,12 @@ pub fn to_py(py: Python<'_>, error: Error) -> PyErr {
     let message = error.to_string();
     let build = || -> PyResult<PyErr> {
         let module = py.import("sorofem.errors")?;
-        let exception = module.getattr(class)?.call1((message.clone(),))?;
+        let exception = match &error {
+            Error::InvalidParameter { param, .. } => module
+                .getattr(class)?
+                .call1((message.clone(), param.clone()))?,
+            _ => module.getattr(class)?.call1((message.clone(),))?,
+        };
         if let Error::NotConverged { report, .. } = &error {
             exception.setattr("report", report_to_dict(py, report)?)?;
         }
@@ -33,6 +42,60 @@ pub trait IntoPyResult<T> {
 impl<T> IntoPyResult<T> for Result<T, Error> {
     fn py(self, py: Python<'_>) -> PyResult<T> {
         self.map_err(|e| to_py(py, e))
+    }
+}
+
+/// Runs a call into the core without the GIL, and makes sure nothing but a `sorofem.errors`
+/// exception comes back: a core error maps through [`to_py`], and a panic (a bug in the core;
+/// it must never reach Python as a `PanicException`, which escapes `except Exception`) becomes
+/// an [`internal_error`].
+pub fn guarded<T: Send>(
+    py: Python<'_>,
+    call: impl FnOnce() -> Result<T, Error> + Send,
+) -> PyResult<T> {
+    match py.detach(|| catch_unwind(AssertUnwindSafe(call))) {
+        Ok(result) => result.py(py),
+        Err(payload) => {
+            let what = payload
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| payload.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "a panic without a message".into());
+            Err(internal_error(py, &what))
+        }
+    }
+}
+
+static INTERNAL_ERROR: PyOnceLock<Py<PyType>> = PyOnceLock::new();
+
+/// `sorofem._core.InternalError`, a subclass of `sorofem.errors.SolverError` (so of
+/// `SorofemError` and `RuntimeError`), created on first use.
+pub fn internal_error_type(py: Python<'_>) -> PyResult<&Bound<'_, PyType>> {
+    let class = INTERNAL_ERROR.get_or_try_init(py, || -> PyResult<Py<PyType>> {
+        let base = py.import("sorofem.errors")?.getattr("SolverError")?;
+        let namespace = PyDict::new(py);
+        namespace.set_item("__module__", "sorofem._core")?;
+        namespace.set_item(
+            "__doc__",
+            "An internal error of sorofem's core (a bug): the message says where. Please report it.",
+        )?;
+        let bases = PyTuple::new(py, [base])?;
+        let class = py
+            .import("builtins")?
+            .getattr("type")?
+            .call1(("InternalError", bases, namespace))?;
+        Ok(class.cast_into::<PyType>()?.unbind())
+    })?;
+    Ok(class.bind(py))
+}
+
+fn internal_error(py: Python<'_>, what: &str) -> PyErr {
+    let message = format!(
+        "internal error in sorofem's core (a bug, please report it with the call that raised it): {what}"
+    );
+    match internal_error_type(py).and_then(|class| class.call1((message.clone(),))) {
+        Ok(exception) => PyErr::from_value(exception),
+        Err(e) => e,
     }
 }
 

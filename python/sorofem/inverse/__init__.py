@@ -50,17 +50,19 @@ Examples
 
 from __future__ import annotations
 
+from ._analysis import PROFILE_CONDITION
 from ._control import control
 from ._estimate import estimate
 from ._gradient import gradient
 from ._parameters import PARAMETERS, parameter_names
 from ._problem import DEFAULT_TOLERANCE
-from .results import ControlResult, FitResult, GradientResult, Uncertainty
+from .results import ControlResult, FitResult, GradientResult, Profile, Uncertainty
 
 __all__ = [
     "PARAMETERS",
     "parameter_names",
     "DEFAULT_TOLERANCE",
+    "PROFILE_CONDITION",
     "gradient",
     "estimate",
     "control",
@@ -68,8 +70,10 @@ __all__ = [
     "FitResult",
     "ControlResult",
     "Uncertainty",
+    "Profile",
 ]
 
 # Documented (and pickled) as members of this package, whichever private module holds them.
-for _public in (gradient, estimate, control, parameter_names, GradientResult, FitResult, ControlResult, Uncertainty):
+for _public in (gradient, estimate, control, parameter_names, GradientResult, FitResult, ControlResult, Uncertainty,
+                Profile):
     _public.__module__ = __name__

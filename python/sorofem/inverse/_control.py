@@ -150,4 +150,5 @@ def control(
         time=time.perf_counter() - t0,
         active_bounds=active,
         history=record.entries,
+        targets=[(sc.name, sc.target) for sc in scs],
     )

@@ -15,7 +15,9 @@ from numpy.typing import ArrayLike
 from ..errors import InputError
 from ..progress import Progress
 from ..solver import SolveOptions
-from ._optimizers import Recorder, levenberg_marquardt, scipy_minimize, uncertainty
+from ._analysis import PROFILE_CONDITION, PROFILE_SPAN, material_std, profile_index, profile_span
+from ._analysis import profile as profile_along
+from ._optimizers import Recorder, bound_sides, levenberg_marquardt, scipy_minimize, uncertainty
 from ._parameters import Parameters
 from ._problem import DEFAULT_TOLERANCE, Problem, final_results, fitted_material
 from ._problem import scenarios as make_scenarios
@@ -64,6 +66,8 @@ def estimate(
     resume: bool = False,
     progress: bool | None = None,
     options: SolveOptions | None = None,
+    profile: bool | str | None = None,
+    profile_values: ArrayLike | None = None,
 ) -> FitResult:
     """Fit material parameters so that the body's equilibrium meets a target.
 
@@ -127,6 +131,18 @@ def estimate(
         lasts more than half a second, ``True`` always, ``False`` never (see
         :mod:`sorofem.progress`). The number of solves is not known in advance: the line
         counts them and shows the elapsed time (no ETA).
+    profile
+        Profile the misfit along one parameter (``fit.profile``, a :class:`Profile`): at each
+        of its values the others are fitted again, and the likelihood-ratio interval is
+        reported. ``None`` (default): along the parameter that weighs most in the worst
+        determined direction, when the condition number of the scaled Jacobian exceeds
+        :data:`~sorofem.inverse.PROFILE_CONDITION` (1e3) and at least two parameters are
+        fitted; ``True``: that parameter, whatever the conditioning; a parameter name: that
+        one; ``False``: no profile. Each point costs a fit of the other parameters.
+    profile_values
+        The values of the profiled parameter, in its units (default: 9 points over four
+        standard errors either side of the optimum, at most a factor 1000 either way in the
+        optimiser's scaling, within the bounds; from the bound for a parameter on one).
 
     Returns
     -------
@@ -215,8 +231,19 @@ def estimate(
         st = p.state(theta)
         material = fitted_material(body, st)
         # J is dr/ds: for log parameters that is dr/dlog(theta), what the singular values
-        # should measure; the covariance is mapped back with dtheta/ds.
-        unc = None if fields or J is None else uncertainty(p.names, theta, p.dtheta_ds(s), r, J[: problem.n_data], problem.n_data)
+        # should measure; the covariance is mapped back with dtheta/ds. A parameter on a bound
+        # is held there: a Gauss-Newton covariance is only valid in the interior.
+        unc = None
+        if not fields and J is not None:
+            unc = uncertainty(p.names, theta, p.dtheta_ds(s), r, J[: problem.n_data], problem.n_data,
+                              bound_sides(s, lo, hi))
+            unc.material_std = material_std(body, p, theta, unc)
+        fit_profile = None
+        index = _profile_choice(profile, p, unc, fields)
+        if index is not None:
+            bar.desc = f"estimate: profile of {p.names[index] if p.size == len(p.names) else index}"
+            span = profile_span(unc, index, p.dtheta_ds(s)) if unc is not None else PROFILE_SPAN
+            fit_profile = profile_along(problem, s, r, index, lo, hi, values=profile_values, span=span)
         results = final_results(body, material, st, scs, p)
     finally:
         bar.close()
@@ -236,6 +263,8 @@ def estimate(
         time=time.perf_counter() - t0,
         history=[e for run in runs for e in run["history"]],
         uncertainty=unc,
+        profile=fit_profile,
+        targets=[(sc.name, sc.target) for sc in scs],
         starts=[
             {"x0": p.as_dict(run["start"]), "params": p.as_dict(p.from_s(run["s"])),
              "loss": run["history"][-1]["loss"] if run["history"] else math.nan,
@@ -244,3 +273,25 @@ def estimate(
         ],
         results=results,
     )
+
+
+def _profile_choice(profile: bool | str | None, p: Parameters, unc: Any, fields: bool) -> int | None:
+    """The index in theta of the parameter to profile, or None."""
+    if profile is False:
+        return None
+    if isinstance(profile, str):
+        block = next((b for b in p.blocks if b.name == profile), None)
+        if block is None or block.size != 1:
+            raise InputError(f"profile: expected the name of a fitted scalar parameter {p.names}, got {profile!r}")
+        return block.offset
+    if profile not in (None, True):
+        raise InputError(f"profile: expected None, True, False or a parameter name, got {profile!r}")
+    if fields or unc is None or unc.weak_direction is None:
+        if profile is True:
+            raise InputError("profile: needs the Jacobian of a fit of scalar parameters (no fields)")
+        return None
+    if profile is None and (len(p.names) < 2 or not unc.condition > PROFILE_CONDITION):
+        return None
+    index = profile_index(unc)
+    block = next(b for b in p.blocks if b.offset <= index < b.offset + b.size)
+    return index if block.size == 1 else None

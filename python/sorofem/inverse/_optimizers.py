@@ -18,7 +18,7 @@ from ..errors import SolverError
 from ._problem import Problem
 from .results import Uncertainty
 
-__all__ = ["Recorder", "levenberg_marquardt", "scipy_minimize", "uncertainty"]
+__all__ = ["Recorder", "levenberg_marquardt", "scipy_minimize", "uncertainty", "bound_sides"]
 
 
 class Recorder:
@@ -180,33 +180,51 @@ def scipy_minimize(
     return np.asarray(res.x, dtype=np.float64), int(res.get("nit", 0)), bool(res.success), str(res.message)
 
 
+def bound_sides(s: NDArray[np.float64], lo: NDArray[np.float64], hi: NDArray[np.float64]) -> list[str | None]:
+    """Per parameter, ``"lower"`` or ``"upper"`` if it sits on that bound (to rounding), else None."""
+    tol = 1e-9 * (1.0 + np.abs(s))
+    return ["lower" if s[i] - lo[i] <= tol[i] else "upper" if hi[i] - s[i] <= tol[i] else None for i in range(len(s))]
+
+
 def uncertainty(
     names: list[str], theta: NDArray[np.float64], dts: NDArray[np.float64], r: NDArray[np.float64],
-    J_s: NDArray[np.float64], n_data: int,
+    J_s: NDArray[np.float64], n_data: int, at_bound: list[str | None] | None = None,
 ) -> Uncertainty:
+    """Gauss-Newton uncertainty from the scaled Jacobian ``J_s = dr/ds`` (``dts = dtheta/ds``).
+
+    The parameters on a bound (``at_bound``) are held there: the covariance is that of the free
+    parameters alone (NaN in the rows of the others); the singular values and the worst
+    determined direction are those of every parameter."""
     p = len(theta)
-    dof = max(n_data - p, 1)
+    sides = list(at_bound) if at_bound is not None else [None] * p
+    bound = np.array([side is not None for side in sides], dtype=bool)
+    free = ~bound
+    dof = max(n_data - int(free.sum()), 1)
     sigma = float(np.sqrt(r[:n_data] @ r[:n_data] / dof))
-    _, sv, vt = np.linalg.svd(J_s, full_matrices=False)
-    null = sv <= 1e-6 * (sv[0] if sv.size and sv[0] > 0 else 1.0)
-    inv_sq = np.where(null, np.inf, 1.0 / np.where(null, 1.0, sv) ** 2)
-    with np.errstate(invalid="ignore"):
-        cov_s = np.einsum("ki,k,kj->ij", vt, inv_sq, vt) * sigma**2 if not np.any(null) else None
-    scale = dts
-    if cov_s is None:
-        # Directions the data do not see: those parameters get an infinite variance.
-        weak = np.any(np.abs(vt[null]) > 1e-2, axis=0)
+    _, sv_all, vt_all = np.linalg.svd(J_s, full_matrices=False)
+    cov_s = np.full((p, p), np.nan)
+    weak = np.zeros(p, dtype=bool)
+    if free.any():
+        _, sv, vt = np.linalg.svd(J_s[:, free], full_matrices=False)
+        null = sv <= 1e-6 * (sv[0] if sv.size and sv[0] > 0 else 1.0)
         good = ~null
-        cov_s = np.einsum("ki,k,kj->ij", vt[good], inv_sq[good], vt[good]) * sigma**2
-        cov_s[weak, :] = np.inf
-        cov_s[:, weak] = np.inf
-    else:
-        weak = np.zeros(p, dtype=bool)
-    cov = cov_s * np.outer(scale, scale)
-    std = np.sqrt(np.abs(np.diag(cov)))
+        inv_sq = 1.0 / np.where(null, 1.0, sv) ** 2
+        sub = np.einsum("ki,k,kj->ij", vt[good], inv_sq[good], vt[good]) * sigma**2
+        # Directions the data do not see: those parameters get an infinite variance.
+        weak_free = np.any(np.abs(vt[null]) > 1e-2, axis=0) if null.any() else np.zeros(int(free.sum()), dtype=bool)
+        sub[weak_free, :] = np.inf
+        sub[:, weak_free] = np.inf
+        cov_s[np.ix_(free, free)] = sub
+        weak[free] = weak_free
+    cov = cov_s * np.outer(dts, dts)
     with np.errstate(invalid="ignore", divide="ignore"):
+        std = np.sqrt(np.abs(np.diag(cov)))
         rel = std / np.abs(theta)
-        corr = cov_s / np.sqrt(np.outer(np.diag(cov_s), np.diag(cov_s)))
-    cond = float(sv[0] / sv[-1]) if sv.size and sv[-1] > 0 else math.inf
-    ident = {n: bool(rel[i] < 0.1 and not weak[i]) for i, n in enumerate(names)} if p == len(names) else {}
-    return Uncertainty(names, sigma, cov, std, rel, np.nan_to_num(corr, nan=0.0), sv, cond, ident)
+        d = np.sqrt(np.diag(cov_s))
+        corr = cov_s / np.outer(d, d)
+    cond = float(sv_all[0] / sv_all[-1]) if sv_all.size and sv_all[-1] > 0 else math.inf
+    ident = {n: bool(free[i] and rel[i] < 0.1 and not weak[i]) for i, n in enumerate(names)} if p == len(names) else {}
+    sides_by_name = dict(zip(names, sides)) if p == len(names) else {}
+    weakest = vt_all[-1] * np.sign(vt_all[-1][np.argmax(np.abs(vt_all[-1]))]) if sv_all.size else None
+    return Uncertainty(names, sigma, cov, std, rel, np.nan_to_num(corr, nan=0.0, posinf=0.0, neginf=0.0), sv_all, cond,
+                       ident, sides_by_name, weakest)

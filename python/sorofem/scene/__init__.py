@@ -4,9 +4,13 @@ Schema
 ------
 ::
 
-    [mesh]                     # required: The tetrahedral mesh: exactly one of file or box.
+    [mesh]                     # required: The tetrahedral mesh: exactly one of file, box or surface.
     file = "beam.vtu"          # mesh file, relative to the scene file: .tet or any volume format meshio reads
     # box = { size = [1, 0.1, 0.1], cells = [8, 2, 2] }   # a box mesh instead of a file
+    # surface = "robot.stl"    # closed triangle surface (.stl, .obj, .ply, .off), relative to the scene file,
+                               # filled with tetrahedra by sf.tetrahedralize (fTetWild: the optional extra 'mesh')
+    # edge_length = 0.004      # target edge length of the tetrahedra filling surface, after scale (default: 1/20
+                               # of the bounding-box diagonal), m
     scale = 1                  # multiplies all coordinates (for box: size and origin)
     axes = ["x", "y", "z"]     # after scale, new axis i is old axis axes[i], with its sign: a signed permutation
                                # of x, y, z; ["x", "-z", "y"] turns a y-up mesh into a z-up one
@@ -81,11 +85,15 @@ Schema
                                          # its actuation), s, -
 
     [target]                   # optional: Where parts of the body should be (sorofem.Target), for sorofem
-                               # estimate / control: exactly one of nodes, points or surface.
+                               # estimate / control: exactly one of nodes, points or surface; nodes and points
+                               # with positions or positions_file.
     nodes = [17, 18, 19]       # observed mesh nodes (with positions)
     # points = [[0.1, 0.01, 0.01]]   # observed marker points at rest, inside the mesh (with positions), m
     positions = [[0.1, 0, -0.01], [0.1, 0.02, -0.01], [0.1, 0.02, 0.01]]   # goal position of each node or point,
                                                                            # m
+    # positions_file = "markers.csv"   # the goal positions from a file instead, relative to the scene file: .npy
+                                       # (k, 3) or a .csv / .txt table with columns x, y, z
+                                       # (sorofem.io.read_points)
     # surface = "goal.obj"     # goal surface file, relative to the scene file
     # scale = 1                # coordinate scale of the surface files
     # rest = "rest.obj"        # the body's own rest surface (default: the mesh boundary)
@@ -105,14 +113,17 @@ Schema
     bounds = [[0.3, 1]]        # one actuation range [lo, hi] per cable (default [0.3, 1])
     method = "l-bfgs-b"        # optimiser
 
-    [output]                   # optional: What sorofem run writes and where (every file is on by default);
-                               # estimate and control also follow directory, summary and vtu.
+    [output]                   # optional: What sorofem run writes and where (every file but deformed.vtu is on by
+                               # default); estimate and control also follow directory, summary, vtu and png.
     directory = "results/beam"   # output folder, relative to the scene file (created); `--out DIR` on the command
                                  # line overrides it
     summary = true             # write summary.json (solver report, timings, material, extreme values)
-    vtu = true                 # write result.vtu (deformed mesh with displacement, J, von Mises, pressure)
-    png = true                 # write the figures: shape.png and convergence.png, or trajectory.png with
-                               # [dynamics]
+    vtu = true                 # write result.vtu (the rest mesh with point data displacement, pressure and cell
+                               # data J, von Mises: Warp By Vector in ParaView shows the deformed body)
+    deformed = false           # also write deformed.vtu: the same data on the deformed mesh (to open without a
+                               # filter; do not warp it again)
+    png = true                 # write the figures: shape.png and convergence.png, trajectory.png with [dynamics],
+                               # fit.png (and profile.png) for estimate and control
     cables = true              # write cables.vtu (the cables as lines with their tension; static scenes with
                                # [[cable]] entries)
     pvd = true                 # write trajectory.pvd and its frames in trajectory/ (scenes with [dynamics])

@@ -13,9 +13,10 @@ from ..body import Body
 from ..cables import Cable
 from ..dynamics import Keyframes
 from ..errors import InputError, ParameterError
-from ..io import read_mesh
+from ..io import read_mesh, read_points
 from ..materials import Material, material_class
 from ..mesh import Mesh
+from ..meshing import INSTALL_HINT, MESHER, mesher_available, tetrahedralize
 from ..plot import COLOR_FIELDS
 from ..targets import Target
 from ._keys import CABLE_OPTIONS, MATERIAL_KEYS
@@ -25,17 +26,34 @@ __all__ = ["build_mesh", "build_material", "apply_fixed", "apply_loads", "apply_
            "build_output", "build_target", "build_estimate", "build_control"]
 
 
+def _file(check: Checker, key: str, name: str, base: Path, what: str) -> Path:
+    """``name`` resolved against the scene file's folder; it must exist."""
+    file = Path(name) if Path(name).is_absolute() else base / name
+    if not file.is_file():
+        raise check.error(key, f"{what} not found: {file}")
+    return file
+
+
 def build_mesh(check: Checker, table: dict[str, Any], base: Path) -> Mesh:
     scale = table["scale"]
     if "file" in table:
-        name = table["file"]
-        file = Path(name) if Path(name).is_absolute() else base / name
-        if not file.is_file():
-            raise check.error("mesh.file", f"mesh file not found: {file}")
+        file = _file(check, "mesh.file", table["file"], base, "mesh file")
         try:
             mesh = read_mesh(file, scale=scale)
         except InputError as exc:
             raise check.error("mesh.file", f"could not read the mesh: {exc}") from None
+    elif "surface" in table:
+        file = _file(check, "mesh.surface", table["surface"], base, "surface file")
+        if not mesher_available():
+            raise check.error("mesh.surface", f"filling a surface with tetrahedra needs the optional mesher "
+                              f"{MESHER}: {INSTALL_HINT}")
+        try:
+            mesh = tetrahedralize(file, table.get("edge_length"), scale=scale)
+        except ParameterError as exc:
+            key = "mesh.edge_length" if exc.parameter == "edge_length" else "mesh.surface"
+            raise check.error(key, str(exc).removeprefix("edge_length: ")) from None
+        except InputError as exc:
+            raise check.error("mesh.surface", f"could not fill the surface with tetrahedra: {exc}") from None
     else:
         box = table["box"]
         mesh = Mesh.box(size=np.array(box["size"]) * scale, cells=box["cells"], origin=np.array(box["origin"]) * scale)
@@ -56,7 +74,7 @@ def _box_bounds(check: Checker, box: dict[str, Any], key: str) -> tuple[np.ndarr
 
 
 def _span(mesh: Mesh) -> str:
-    lo, hi = mesh.bounds()
+    lo, hi = mesh.bounds
     return f"the mesh spans {np.round(lo, 6).tolist()} .. {np.round(hi, 6).tolist()}"
 
 
@@ -258,7 +276,17 @@ def build_target(check: Checker, table: dict[str, Any], body: Body, base: Path) 
             raise check.error(key, str(exc)) from None
     else:
         kind = "nodes" if "nodes" in table else "points"
-        positions = np.array(table["positions"])
+        if "positions_file" in table:
+            files["positions_file"] = _file(check, "target.positions_file", table["positions_file"], base, "points file")
+            try:
+                positions = read_points(files["positions_file"])
+            except InputError as exc:
+                raise check.error("target.positions_file", str(exc)) from None
+        elif "positions" in table:
+            positions = np.array(table["positions"])
+        else:
+            raise check.error("target.positions", f"missing: expected the goal of each of '{kind}' as positions = "
+                              "[[x, y, z], ...] or positions_file = \"markers.csv\"")
         if kind == "nodes":
             nodes = np.array(table["nodes"], dtype=np.int64)
             if nodes.max() >= body.mesh.n_nodes:
@@ -270,8 +298,9 @@ def build_target(check: Checker, table: dict[str, Any], body: Body, base: Path) 
         else:
             rest = np.array(table["points"])
         if len(positions) != len(rest):
+            where = "target.positions_file" if "positions_file" in table else "target.positions"
             raise check.error(
-                "target.positions", f"expected {len(rest)} positions, one per entry of '{kind}', got {len(positions)}"
+                where, f"expected {len(rest)} positions, one per entry of '{kind}', got {len(positions)}"
             )
         key = f"target.{kind}"
         try:

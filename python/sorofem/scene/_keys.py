@@ -165,6 +165,15 @@ _MESH = Table(
             ),
             "a box mesh instead of a file", example={"size": [1.0, 0.1, 0.1], "cells": [8, 2, 2]}, commented=True,
         ),
+        "surface": Field(
+            String(), "closed triangle surface (.stl, .obj, .ply, .off), relative to the scene file, filled with "
+            "tetrahedra by sf.tetrahedralize (fTetWild: the optional extra 'mesh')", example="robot.stl", commented=True,
+            see=("From a surface to a simulation", "#from-a-surface-to-a-simulation"),
+        ),
+        "edge_length": Field(
+            Number(Range(gt=0)), "target edge length of the tetrahedra filling surface, after scale (default: 1/20 of "
+            "the bounding-box diagonal)", "m", example=0.004, commented=True,
+        ),
         "scale": Field(Number(Range(gt=0)), "multiplies all coordinates (for box: size and origin)", default=1.0),
         "axes": Field(
             Array(String(Mesh.AXIS_NAMES), 3, 3),
@@ -173,8 +182,8 @@ _MESH = Table(
             default=["x", "y", "z"], see=("Axes", "#axes"),
         ),
     },
-    choices=(Choice((Group(("file",)), Group(("box",)))),),
-    doc="The tetrahedral mesh: exactly one of file or box.",
+    choices=(Choice((Group(("file",)), Group(("box",)), Group(("surface",), ("edge_length",)))),),
+    doc="The tetrahedral mesh: exactly one of file, box or surface.",
 )
 
 #: Defaults of the formulation options: sorofem.Body's own.
@@ -305,6 +314,10 @@ _TARGET = Table(
                         example=[[0.1, 0.01, 0.01]], commented=True),
         "positions": Field(_POINTS, "goal position of each node or point", "m",
                            example=[[0.1, 0, -0.01], [0.1, 0.02, -0.01], [0.1, 0.02, 0.01]]),
+        "positions_file": Field(
+            String(), "the goal positions from a file instead, relative to the scene file: .npy (k, 3) or a .csv / "
+            ".txt table with columns x, y, z (sorofem.io.read_points)", example="markers.csv", commented=True,
+        ),
         "surface": Field(String(), "goal surface file, relative to the scene file", example="goal.obj",
                          commented=True),
         "scale": Field(Number(Range(gt=0)), "coordinate scale of the surface files", default=1.0, commented=True),
@@ -313,11 +326,13 @@ _TARGET = Table(
     },
     choices=(
         Choice((
-            Group(("nodes", "positions")), Group(("points", "positions")), Group(("surface",), ("scale", "rest"))
+            Group(("nodes",), ("positions", "positions_file")), Group(("points",), ("positions", "positions_file")),
+            Group(("surface",), ("scale", "rest")),
         )),
+        Choice((Group(("positions",)), Group(("positions_file",))), required=False),
     ),
     doc="Where parts of the body should be (sorofem.Target), for sorofem estimate / control: exactly one of nodes, "
-    "points or surface.",
+    "points or surface; nodes and points with positions or positions_file.",
 )
 
 #: Parameter names [estimate] accepts (sorofem.inverse's for every model), material ones optionally ":REGION".
@@ -363,10 +378,12 @@ _OUTPUT = Table(
         ),
         "summary": Field(Boolean(), "write summary.json (solver report, timings, material, extreme values)",
                          default=True),
-        "vtu": Field(Boolean(), "write result.vtu (deformed mesh with displacement, J, von Mises, pressure)",
-                     default=True),
-        "png": Field(Boolean(), "write the figures: shape.png and convergence.png, or trajectory.png with "
-                     "[dynamics]", default=True),
+        "vtu": Field(Boolean(), "write result.vtu (the rest mesh with point data displacement, pressure and cell "
+                     "data J, von Mises: Warp By Vector in ParaView shows the deformed body)", default=True),
+        "deformed": Field(Boolean(), "also write deformed.vtu: the same data on the deformed mesh (to open without a "
+                          "filter; do not warp it again)", default=False),
+        "png": Field(Boolean(), "write the figures: shape.png and convergence.png, trajectory.png with "
+                     "[dynamics], fit.png (and profile.png) for estimate and control", default=True),
         "cables": Field(Boolean(), "write cables.vtu (the cables as lines with their tension; static scenes "
                         "with [[cable]] entries)", default=True),
         "pvd": Field(Boolean(), "write trajectory.pvd and its frames in trajectory/ (scenes with [dynamics])",
@@ -376,8 +393,8 @@ _OUTPUT = Table(
             "von Mises stress, pressure (kind = \"mixed\" only) or the volume ratio J", default="displacement",
         ),
     },
-    doc="What sorofem run writes and where (every file is on by default); estimate and control also follow "
-    "directory, summary and vtu.",
+    doc="What sorofem run writes and where (every file but deformed.vtu is on by default); estimate and control "
+    "also follow directory, summary, vtu and png.",
 )
 
 SCENE = Table(

@@ -23,7 +23,8 @@ toggle. Each frame moves the vertices of the one surface mesh, the cables and th
 displacement-coloured surface nodes (one colour scale, 0 .. the largest displacement of the
 whole motion); nothing is re-created.
 
-Needs the optional extra ``pip install "sorofem[viewer]"`` (viser). :func:`build_view` takes any
+Needs the optional extra ``viewer`` (viser, trimesh): ``pip install ".[viewer]"`` from a checkout
+of sorofem (README, "Install"). :func:`build_view` takes any
 ``viser.ViserServer``, so it runs without a browser (that is how it is tested); ``_cli`` starts the
 server and waits.
 

@@ -16,7 +16,8 @@ def require_viser() -> Any:
         import viser
     except ImportError:
         raise InputError(
-            "sorofem view needs the optional dependency viser: pip install 'sorofem[viewer]'"
+            "sorofem view needs the optional dependency viser: pip install \".[viewer]\" from a checkout of "
+            "sorofem (or pip install 'viser>=1.1,<1.2' trimesh)"
         ) from None
     return viser
 

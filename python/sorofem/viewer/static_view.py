@@ -326,7 +326,7 @@ def build_view(scene: Scene, server: Any, *, alpha_range: tuple[float, float] = 
     view = View(server=server, scene=scene, body=body, result=result, surface_faces=remap[faces], surface_nodes=nodes,
                 solves=1)
 
-    lo, hi = body.mesh.bounds()
+    lo, hi = body.mesh.bounds
     size = float(np.linalg.norm(hi - lo))
     server.scene.set_up_direction("+z")
     view.surface = server.scene.add_glb("/body/deformed", glb_data=view._surface_glb())

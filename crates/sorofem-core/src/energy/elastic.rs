@@ -47,7 +47,7 @@ pub enum Formulation {
     Standard,
     /// Nodal pressure unknowns start at full DOF index `pressure_offset`, after the
     /// displacements of the mesh nodes and of any free cable nodes
-    /// (see [`crate::model::DofLayout`]).
+    /// (see `model/layout.rs`).
     Mixed {
         pressure_offset: usize,
         mass: PressureMass,

@@ -18,7 +18,6 @@ pub use statics::{Loads, Solution};
 use crate::assembly::{Assembler, Evaluation};
 use crate::cables::{embed, CableSpec, PointPlacement};
 use crate::energy::elastic::PressureCompliance;
-use crate::energy::{CableTerm, ElasticTerm, LumpedMass};
 pub use crate::energy::{Formulation as ElementFormulation, PressureMass};
 use crate::error::{check_finite, Error, Result};
 use crate::linear::{FactorKind, SparseFactor};
@@ -26,6 +25,7 @@ use crate::material::{shear_modulus, MaterialModel, Volumetric};
 use crate::mesh::TetMesh;
 use crate::newton::NewtonOptions;
 use std::sync::Arc;
+pub use terms::TermSpecs;
 use terms::Terms;
 
 /// The discretisation of the volumetric response.
@@ -54,7 +54,6 @@ pub struct Model {
     pub(crate) formulation: Formulation,
     pub(crate) layout: DofLayout,
     pub(crate) terms: Terms,
-    pub(crate) placements: Vec<Vec<PointPlacement>>,
     /// The constructor's volumetric measure: the Neo-Hookean model's unless told otherwise.
     pub(crate) volumetric: Volumetric,
     pub(crate) assembler: Assembler,
@@ -93,6 +92,20 @@ impl Model {
         volumetric: Volumetric,
         cables: &[CableSpec],
     ) -> Result<Self> {
+        let specs = TermSpecs {
+            cables: cables.to_vec(),
+        };
+        Self::try_new_with_terms(mesh, fixed_nodes, formulation, volumetric, &specs)
+    }
+
+    /// [`Model::try_new`] with the terms `specs` describes beside elasticity and gravity.
+    pub fn try_new_with_terms(
+        mesh: Arc<TetMesh>,
+        fixed_nodes: &[i64],
+        formulation: Formulation,
+        volumetric: Volumetric,
+        specs: &TermSpecs,
+    ) -> Result<Self> {
         let n = mesh.n_nodes();
         let mut fixed_set = vec![false; n];
         let mut fixed = Vec::with_capacity(fixed_nodes.len());
@@ -115,37 +128,13 @@ impl Model {
             fixed_set[node as usize] = true;
             fixed.push(node as usize);
         }
-        let n_tets = mesh.n_tets();
-        let embedded = embed(&mesh, cables)?;
+        let embedded = embed(&mesh, &specs.cables)?;
         let layout = DofLayout {
             n_nodes: n,
             n_free_nodes: embedded.free_nodes.len(),
             pressures: matches!(formulation, Formulation::Mixed { .. }),
         };
-        let element_formulation = match formulation {
-            Formulation::Standard => ElementFormulation::Standard,
-            Formulation::Mixed { mass } => ElementFormulation::Mixed {
-                pressure_offset: layout.n_displacement(),
-                mass,
-            },
-        };
-        let terms = Terms {
-            elastic: ElasticTerm::neo_hookean(
-                mesh.clone(),
-                &vec![1.0; n_tets],
-                &vec![1.0; n_tets],
-                volumetric,
-                element_formulation,
-            ),
-            cables: CableTerm::new(embedded.cables),
-            mass: LumpedMass {
-                mesh: mesh.clone(),
-                density: vec![0.0; n_tets],
-                points: (embedded.free_nodes.iter().enumerate())
-                    .map(|(i, &(_, mass))| (layout.free_node(i), mass))
-                    .collect(),
-            },
-        };
+        let terms = Terms::new(&mesh, &layout, formulation, volumetric, embedded, specs)?;
         let fixed_dofs = layout.fixed_dofs(&fixed);
         // The symbolic factorisation needs only the pattern: it runs beside the element plans.
         let (assembler, factor) = match formulation {
@@ -179,7 +168,6 @@ impl Model {
             formulation,
             layout,
             terms,
-            placements: embedded.placements,
             volumetric,
             assembler,
             factor: factor?,
@@ -250,7 +238,7 @@ impl Model {
 
     /// Where each cable point was placed (embedded, snapped, free node or anchor).
     pub fn cable_placements(&self) -> &[Vec<PointPlacement>] {
-        &self.placements
+        &self.terms.placements
     }
 
     pub fn n_cables(&self) -> usize {

@@ -50,9 +50,9 @@ impl Model {
         let mut problem = System::new(self, full_load, prescribed, None, options);
         // Only the prescribed displacements are scaled by the load factor: the initial guess is
         // kept as given for the free DOFs, which is what warm starts need.
-        // The Newton loop runs on a worker of the thread pool. On the calling thread, its
-        // single-threaded factorisations left both workers asleep for 15 ms at a time, and every
-        // element pass after one was about 1.5x slower (12k-tet cantilever, 2 cores).
+        // The Newton loop runs on a worker of the thread pool: from the calling thread, its
+        // single-threaded factorisations let the workers fall asleep and the element passes
+        // after them ran slower (docs/theory.md, "Newton's method").
         let report = rayon::scope(|_| newton::solve(&mut problem, &mut z, options))?;
         let full_load = std::mem::take(&mut problem.full_load);
         drop(problem);

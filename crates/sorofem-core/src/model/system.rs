@@ -28,7 +28,7 @@ pub(super) struct System<'a> {
     linearised_pressures: PressureLinearisations,
     linearised_at_iterate: bool,
     /// The element pressure iterates of the current iterate (the model's elastic term holds
-    /// those of the state last moved to with `trial_iterates`).
+    /// those of the state last moved to with `AuxiliaryIterates::trial`).
     pressure_base: Vec<f64>,
     /// The model's Hessian scratch holds the exact Hessian at the state last evaluated.
     hessian_prepared: bool,

@@ -1,19 +1,35 @@
 //! The registry of a model's energy terms: the one place that lists them. Assembly, Newton,
 //! reactions, dynamics and sensitivities all iterate these lists, so a new term is added here
-//! (a field, its construction, one line in each list it belongs to) and nowhere else in the
-//! model.
+//! (its input in [`TermSpecs`], a field of [`Terms`], its construction, one line in each list it
+//! belongs to) and nowhere else in the model.
 
+use super::layout::DofLayout;
 use super::statics::Loads;
+use super::Formulation;
+use crate::cables::{CableSpec, EmbeddedCables, PointPlacement};
 use crate::energy::{
-    CableTerm, ElasticTerm, GravityTerm, LumpedMass, NodalForceTerm, ParamTerm, PointGravityTerm,
-    Term,
+    CableTerm, ElasticTerm, Formulation as ElementFormulation, GravityTerm, LumpedMass,
+    NodalForceTerm, ParamTerm, PointGravityTerm, Term,
 };
+use crate::error::Result;
+use crate::material::Volumetric;
+use crate::mesh::TetMesh;
+use std::sync::Arc;
+
+/// What a model is built with beyond its mesh, supports and material: the input of every
+/// optional term.
+#[derive(Clone, Debug, Default)]
+pub struct TermSpecs {
+    pub cables: Vec<CableSpec>,
+}
 
 /// Every energy term of a model, and the lumped mass that gravity and inertia act on.
 pub(crate) struct Terms {
     pub elastic: ElasticTerm,
     pub cables: CableTerm,
     pub mass: LumpedMass,
+    /// Where each cable point was placed.
+    pub placements: Vec<Vec<PointPlacement>>,
 }
 
 /// The loads of one solve as terms. They are linear in the displacements, so they enter Newton
@@ -25,6 +41,45 @@ pub(crate) struct LoadTerms<'a> {
 }
 
 impl Terms {
+    /// The terms of a model on `mesh` with DOFs `layout`: Neo-Hookean elasticity (parameters
+    /// set later), the cables `embedded` from `specs.cables` (their free nodes already in
+    /// `layout`), and the lumped mass (densities set later).
+    pub fn new(
+        mesh: &Arc<TetMesh>,
+        layout: &DofLayout,
+        formulation: Formulation,
+        volumetric: Volumetric,
+        embedded: EmbeddedCables,
+        _specs: &TermSpecs,
+    ) -> Result<Self> {
+        let n_tets = mesh.n_tets();
+        let element_formulation = match formulation {
+            Formulation::Standard => ElementFormulation::Standard,
+            Formulation::Mixed { mass } => ElementFormulation::Mixed {
+                pressure_offset: layout.n_displacement(),
+                mass,
+            },
+        };
+        Ok(Terms {
+            elastic: ElasticTerm::neo_hookean(
+                mesh.clone(),
+                &vec![1.0; n_tets],
+                &vec![1.0; n_tets],
+                volumetric,
+                element_formulation,
+            ),
+            cables: CableTerm::new(embedded.cables),
+            mass: LumpedMass {
+                mesh: mesh.clone(),
+                density: vec![0.0; n_tets],
+                points: (embedded.free_nodes.iter().enumerate())
+                    .map(|(i, &(_, mass))| (layout.free_node(i), mass))
+                    .collect(),
+            },
+            placements: embedded.placements,
+        })
+    }
+
     /// The terms whose sum is the internal energy, in the assembler's order (the assembler is
     /// built from this list and every evaluation passes it again).
     pub fn internal(&self) -> [&dyn Term; 2] {
