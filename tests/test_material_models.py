@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import sorofem as sf
+from sorofem.cli import main
 from fdcheck import central_difference, check_gradient
 
 # Silicone-like coefficients (Pa, 1/Pa): shear modulus ~ 20-25 kPa, bulk modulus ~ 1 MPa.
@@ -105,3 +106,80 @@ def test_cantilever_sensitivities_by_coefficient_name(name: str) -> None:
     assert check.passed, str(check)
     # Each coefficient matters: the tip moves by a measurable amount along every direction.
     assert np.all(np.abs(grad * theta) > 1e-9), dict(zip(names, grad * theta))
+
+
+SCENE_MATERIALS = {
+    "mooney-rivlin": 'model = "mooney-rivlin"\nc10 = 8e3\nc01 = 3e3\nd1 = 2e-6',
+    "yeoh": 'model = "yeoh"\nc10 = 11e3\nc20 = -400.0\nc30 = 40.0\nd1 = 2e-6\nd2 = 4e-5',
+    "ogden": 'model = "ogden"\n"mu:0" = 1.9e3\n"alpha:0" = -3.8\n"mu:1" = 2.2e4\n"alpha:1" = 1.7\n'
+             '"mu:2" = -1.5e3\n"alpha:2" = 4.2\nd1 = 2e-6',
+}
+
+
+def scene_text(material: str, formulation: str = "standard", region: str = "") -> str:
+    return (
+        '[mesh]\nbox = { size = [0.1, 0.02, 0.02], cells = [4, 1, 1] }\n\n'
+        f"[material]\n{material}\ndensity = 1070\n{region}\n"
+        f'[formulation]\nkind = "{formulation}"\n\n'
+        "[[fixed]]\nbox = { min = [-1e-9, -1, -1], max = [1e-9, 1, 1] }\n\n"
+        "[loads]\ngravity = [0, 0, -9.81]\n"
+    )
+
+
+@pytest.mark.parametrize("name", list(MATERIALS))
+@pytest.mark.parametrize("formulation", ["standard", "mixed"])
+def test_scene_material_model_matches_the_body(tmp_path, name: str, formulation: str) -> None:
+    """[material] model = "yeoh" etc. with the coefficient names builds the same material and
+    equilibrium as the Python API."""
+    path = tmp_path / "scene.toml"
+    path.write_text(scene_text(SCENE_MATERIALS[name], formulation))
+    scene = sf.Scene.load(path)
+    assert type(scene.material) is type(MATERIALS[name])
+    assert scene.material.to_dict() == MATERIALS[name].to_dict()
+    body = sf.Body(scene.mesh, MATERIALS[name], formulation=formulation)
+    body.fix(scene.body.fixed_nodes)
+    expected = sf.solve_static(body, gravity=[0, 0, -9.81]).positions
+    assert np.abs(scene.solve().positions - expected).max() < 1e-12
+
+
+def test_scene_region_overrides_an_ogden_coefficient(tmp_path) -> None:
+    """A [[material.region]] entry gives one coefficient; the others are inherited, and the tip
+    (made stiffer) sags less."""
+    region = '\n[[material.region]]\nbox = { min = [0.05, -1, -1], max = [1, 1, 1] }\n"mu:1" = 8.8e4\n'
+    path = tmp_path / "scene.toml"
+    path.write_text(scene_text(SCENE_MATERIALS["ogden"]))
+    plain = sf.Scene.load(path)
+    path.write_text(scene_text(SCENE_MATERIALS["ogden"], region=region))
+    stiff = sf.Scene.load(path)
+    mu1 = np.asarray(stiff.material.value("mu:1"))
+    centroids = stiff.mesh.points[stiff.mesh.tets].mean(axis=1)[:, 0]
+    assert np.all(mu1[centroids >= 0.05] == 8.8e4) and np.all(mu1[centroids < 0.05] == 2.2e4)
+    assert np.all(np.asarray(stiff.material.value("alpha:2")) == 4.2)
+    assert stiff.solve().displacement[:, 2].min() > plain.solve().displacement[:, 2].min()
+
+
+@pytest.mark.parametrize(
+    ("material", "key", "words"),
+    [
+        ('model = "yeoh"\nc10 = 11e3\nc20 = 0.0\nc30 = 0.0\nd1 = 0.0', "material.d1", ["> 0", "got 0"]),
+        ('model = "mooney-rivlin"\nc10 = 8e3\nc01 = -9e3\nd1 = 2e-6', "material.c10", ["c10 + c01 > 0"]),
+        ('model = "ogden"\n"mu:0" = 2e4\n"alpha:0" = 0.0\nd1 = 2e-6', "material.alpha:0", ["nonzero"]),
+    ],
+)
+def test_bad_scene_coefficients_exit_2_naming_the_key(tmp_path, capsys, material: str, key: str, words: list[str]) -> None:
+    path = tmp_path / "scene.toml"
+    path.write_text(scene_text(material))
+    assert main(["run", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert key in err and all(w in err for w in words), err
+
+
+def test_cli_run_writes_the_model_and_its_coefficients(tmp_path) -> None:
+    import json
+
+    path = tmp_path / "scene.toml"
+    path.write_text(scene_text(SCENE_MATERIALS["yeoh"], "mixed"))
+    assert main(["run", str(path), "--out", str(tmp_path / "out")]) == 0
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["material"]["model"] == "yeoh"
+    assert summary["material"]["c20"] == -400.0 and summary["material"]["d2"] == 4e-5

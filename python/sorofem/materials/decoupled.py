@@ -81,8 +81,8 @@ YEOH = MaterialModel(
     parameters=(
         Parameter("c10", "C10", "Pa", "first Yeoh coefficient (shear modulus 2 c10)",
                   Range(gt=0, low_note="the small-strain shear modulus is 2 c10"), LOG, core_key="c10"),
-        Parameter("c20", "C20", "Pa", "second Yeoh coefficient", Range(), IDENTITY, core_key="c20", default=0.0),
-        Parameter("c30", "C30", "Pa", "third Yeoh coefficient", Range(), IDENTITY, core_key="c30", default=0.0),
+        Parameter("c20", "C20", "Pa", "second Yeoh coefficient", Range(), IDENTITY, core_key="c20"),
+        Parameter("c30", "C30", "Pa", "third Yeoh coefficient", Range(), IDENTITY, core_key="c30"),
         _D1,
         _higher_compressibility("d2"),
         _higher_compressibility("d3"),
