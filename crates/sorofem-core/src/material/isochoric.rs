@@ -221,9 +221,8 @@ pub fn add_bar_i2_hessian(kin: &Kinematics, i2: &BarInvariant, coeff: f64, t: &m
 ///
 /// An isochoric energy has no stiffness against dilation, so without this share the mixed
 /// formulation's displacement block would have none either, and Newton's method wanders far
-/// from the solution (the hammerbot under gravity at nu = 0.4999: 79 iterations instead of 12;
-/// the standard formulation's Hessian, whose primary term is taken at pressure iterates, needs
-/// projected steps). The compressible Neo-Hookean's rest part carries the same `2 mu/3` through
+/// from the solution on nearly incompressible bodies (as does the standard formulation, whose
+/// primary term's Hessian is taken at pressure iterates). The compressible Neo-Hookean's rest part carries the same `2 mu/3` through
 /// its `-mu ln J`. `kappa_s -> a` for nearly incompressible materials and stays below `kappa`,
 /// so the primary term keeps a positive modulus for every `d1 > 0`. The energy is unchanged; the
 /// mixed compliance is `1/(kappa - kappa_s) = d1/2 + a d1^2/4`, which still vanishes as d1 -> 0.
