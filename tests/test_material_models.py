@@ -203,3 +203,25 @@ def test_estimate_recovers_coefficients_by_name(name: str, params: list[str], x0
     for p in params:
         assert fit.params[p] == pytest.approx(truth.value(p), rel=1e-5), (p, fit.params)
     assert fit.converged
+
+
+@pytest.mark.parametrize(
+    ("build", "parameter", "words"),
+    [
+        (lambda: sf.MooneyRivlin(c10=8e3, c01=3e3, d1=0.0), "d1", ["> 0", "got 0"]),
+        (lambda: sf.MooneyRivlin(c10=-8e3, c01=3e3, d1=2e-6), "c10", ["c10 + c01 > 0"]),
+        (lambda: sf.Yeoh(c10=0.0, d1=2e-6), "c10", ["> 0"]),
+        (lambda: sf.Yeoh(c10=1e4), "d1", ["required"]),
+        (lambda: sf.Yeoh(c10=1e4, d1=2e-6, d2=-1e-5), "d2", [">= 0"]),
+        (lambda: sf.Ogden(mu=[1e4, 2e3], alpha=[2.0], d1=2e-6), "alpha", ["as many exponents"]),
+        (lambda: sf.Ogden(mu=[1e4] * 4, alpha=[2.0] * 4, d1=2e-6), "mu", ["1 to 3"]),
+        (lambda: sf.Ogden(mu=[1e4, 2e3], alpha=[2.0, 0.0], d1=2e-6), "alpha:1", ["nonzero"]),
+        (lambda: sf.Ogden(mu=[-1e4], alpha=[2.0], d1=2e-6), "mu:0", ["sum_p mu_p"]),
+        (lambda: sf.Yeoh(c10=1e4, c20=float("nan"), d1=2e-6), "c20", ["finite"]),
+    ],
+)
+def test_bad_coefficients_name_the_parameter(build, parameter: str, words: list[str]) -> None:
+    with pytest.raises(sf.ParameterError) as err:
+        build()
+    assert err.value.parameter == parameter and str(err.value).startswith(f"{parameter}:")
+    assert all(w in str(err.value) for w in words), str(err.value)
