@@ -133,6 +133,8 @@ def _check_shear(material: Material, names: Sequence[str], what: str) -> None:
 class MooneyRivlin(Material, model=MOONEY_RIVLIN):
     """Decoupled Mooney-Rivlin material, ``W = c10 (I1b - 3) + c01 (I2b - 3) + (J - 1)^2 / d1``.
 
+    Each value is a scalar or a per-element array ``(n_tets,)``.
+
     Parameters
     ----------
     c10, c01
@@ -142,8 +144,6 @@ class MooneyRivlin(Material, model=MOONEY_RIVLIN):
         1/Pa, > 0: the bulk modulus is ``2 / d1``.
     density
         kg/m^3, >= 0.
-
-    Each value is a scalar or a per-element array ``(n_tets,)``.
 
     Raises
     ------
@@ -167,6 +167,8 @@ class Yeoh(Material, model=YEOH):
     """Decoupled Yeoh material,
     ``W = sum_i ci0 (I1b - 3)^i + sum_i (J - 1)^(2i) / d_i`` (i = 1..3).
 
+    Each value is a scalar or a per-element array ``(n_tets,)``.
+
     Parameters
     ----------
     c10
@@ -179,8 +181,6 @@ class Yeoh(Material, model=YEOH):
         1/Pa, >= 0; 0 (the default) means no such term.
     density
         kg/m^3, >= 0.
-
-    Each value is a scalar or a per-element array ``(n_tets,)``.
 
     Raises
     ------
@@ -227,7 +227,8 @@ class Ogden(Material, model=OGDEN):
 
     In this convention (Abaqus's) ``alpha = 2`` is Mooney-Rivlin's ``c10 = mu/2`` and
     ``alpha = -2`` its ``c01 = mu/2``. The parameter names of :func:`sorofem.estimate` are
-    ``"mu:0"``, ``"alpha:0"``, ``"mu:1"``, ... and ``"d1"``.
+    ``"mu:0"``, ``"alpha:0"``, ``"mu:1"``, ... and ``"d1"``. Each value (each term's, for ``mu``
+    and ``alpha``) is a scalar or a per-element array ``(n_tets,)``.
 
     Parameters
     ----------
@@ -240,9 +241,6 @@ class Ogden(Material, model=OGDEN):
         1/Pa, > 0: the bulk modulus is ``2 / d1``.
     density
         kg/m^3, >= 0.
-
-    Each value (each term's, for ``mu`` and ``alpha``) is a scalar or a per-element array
-    ``(n_tets,)``.
 
     Raises
     ------
