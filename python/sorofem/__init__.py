@@ -84,7 +84,6 @@ __all__ = [
     "cables",
     "dynamics",
     "errors",
-    "fitting",
     "inverse",
     "io",
     "materials",
