@@ -20,6 +20,8 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet "maturin>=1.5,<2.0" $(call requirements) $(call requirements,test)
 # The optional mesher (extra `mesh`), so that `make test` covers sf.tetrahedralize; skipped without it.
 	$(PY) -m pip install --quiet $(call requirements,mesh) || echo "warning: pytetwild not installed: the sf.tetrahedralize tests will be skipped"
+# Dask, pyarrow and zarr (extra `cluster`), so that `make test` covers sf.sweep.
+	$(PY) -m pip install --quiet $(call requirements,cluster)
 	touch $(STAMP)
 
 $(BUILD_STAMP): $(STAMP) $(RUST_SOURCES)

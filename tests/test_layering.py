@@ -51,6 +51,12 @@ LAYERS: list[tuple[str, ...]] = [
     ("viewer.playback",),
     ("viewer.static_view",),
     ("viewer",),
+    ("sweeps._cases",),
+    ("sweeps._store",),
+    ("sweeps._solve",),
+    ("sweeps._run",),
+    ("sweeps.cli",),
+    ("sweeps",),
     ("cli",),
     # The facade (re-exports the public names) and the deprecated module, above everything.
     ("",),

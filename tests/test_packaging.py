@@ -66,7 +66,7 @@ def test_every_import_is_declared() -> None:
     the module that imports it (the viewer's trimesh was once used without being declared)."""
     runtime = _requirements()
     extras = {name: _requirements(name) for name in PYPROJECT["optional-dependencies"]}
-    module_extra = {"viewer": "viewer", "meshing": "mesh", "static": "pyvista"}
+    module_extra = {"viewer": "viewer", "meshing": "mesh", "static": "pyvista", "sweeps": "cluster"}
     missing = []
     for top, modules in _third_party_imports().items():
         distribution = _distribution(top)

@@ -120,8 +120,8 @@ def _resolve(target: str, owner: griffe.Object, pkg: griffe.Module) -> griffe.Ob
     for scope, path in candidates:
         try:
             found = scope[path]
-        except (KeyError, ValueError):
-            continue
+        except (KeyError, ValueError, griffe.AliasResolutionError):
+            continue  # not there, or looked up through an import from another package
         try:
             return found.final_target if found.is_alias else found
         except griffe.AliasResolutionError:

@@ -37,6 +37,7 @@ from .meshing import tetrahedralize  # the mesher itself (optional extra) is imp
 from .scene import Scene
 from .solver import SolveOptions, SolveReport
 from .static import StaticResult, actuate, solve_static
+from .sweeps import load_sweep, sweep
 from .targets import Target
 
 # sorofem.cables.actuate moved up a layer (it solves): the old name answers from here.
@@ -72,6 +73,8 @@ __all__ = [
     "gradient",
     "estimate",
     "control",
+    "sweep",
+    "load_sweep",
     "tetrahedralize",
     "SorofemError",
     "InputError",

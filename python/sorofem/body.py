@@ -387,6 +387,11 @@ class Body:
             self._model_key = key
         return self._model
 
+    def __getstate__(self) -> dict[str, Any]:
+        # The compiled model does not pickle; a body sent to another process (a Dask worker)
+        # travels without it and builds its own on first use.
+        return {**self.__dict__, "_model": None, "_model_key": None}
+
     def __repr__(self) -> str:
         options = "".join(f", {k}={v!r}" for k, v in self.formulation_options.items())
         return (

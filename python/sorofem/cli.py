@@ -9,6 +9,7 @@ Usage::
     sorofem convert IN OUT [--scale S] [--quiet]
     sorofem view SCENE.toml | RUN_DIR | FILE.pvd [--trajectory] [--port P] [--host H]
     sorofem schema [--out FILE [--force]]
+    sorofem sweep SCENE.toml --out DIR [--grid KEY=V1,V2,...] [--sample KEY=LO:HI --samples N] ...
     sorofem --version
 
 ``run`` writes ``DIR/result.vtu``, ``DIR/summary.json``, ``DIR/shape.png`` and
@@ -46,6 +47,10 @@ conditioned, profiles the misfit along the worst determined parameter (``summary
 ``profile``, ``DIR/profile.png``).
 An estimate that does not converge, or a control target that is not reachable, exits 3
 (the outputs are still written). They follow ``[output]`` ``directory``, ``summary`` and ``vtu``.
+
+``sweep`` solves many variants of a scene, overriding keys by their dotted names, on a Dask
+cluster, one row per case in ``DIR/results.parquet`` (:mod:`sorofem.sweeps.cli`; needs
+the extra ``cluster``).
 
 ``schema`` prints the JSON Schema of scene files (:func:`sorofem.scene.json_schema`), or
 writes it to ``--out FILE``; it never overwrites an existing file unless ``--force`` is given.
@@ -87,6 +92,7 @@ from .plot import plot_convergence, plot_fit, plot_profile, plot_rest_and_deform
 from .progress import default as progress_default
 from .scene import Scene, schema_text
 from .solver import SolveReport
+from .sweeps import cli as sweep_cli
 from .viewer import serve as view_command
 
 __all__ = ["main"]
@@ -196,6 +202,9 @@ def _build_parser() -> argparse.ArgumentParser:
     schema = sub.add_parser("schema", help="print the JSON Schema of scene files (for editors)")
     schema.add_argument("--out", type=Path, metavar="FILE", help="write it to FILE instead of printing it")
     schema.add_argument("--force", action="store_true", help="overwrite FILE if it exists")
+
+    sweep_cli.add_arguments(sub.add_parser("sweep", help="solve many variants of a scene on a Dask cluster "
+                                           "(needs the extra cluster)"))
     return parser
 
 
@@ -237,6 +246,8 @@ def _dispatch(args: argparse.Namespace) -> int:
         return view_command(args.scene, host=args.host, port=args.port, trajectory=args.trajectory)
     if args.command == "schema":
         return _schema(args)
+    if args.command == "sweep":
+        return sweep_cli.run_command(args)
     return _info(args)
 
 

@@ -41,6 +41,58 @@ def _read_history(path: Path, names: list[str]) -> list[dict[str, Any]]:
     return entries
 
 
+def _fit_from(problem: Problem, p: Parameters, theta_start: Any, method: str, lo: Any, hi: Any, record: Recorder,
+              max_evaluations: int, xtol: float, ftol: float) -> dict[str, Any]:
+    """One start of a fit: its optimum, residual, Jacobian (least squares) and history."""
+    for sc in problem.scenarios:  # every start from the same beginning
+        sc.initial = sc.given_initial
+    solves_before, iterations_before = problem.forward_solves, problem.newton_iterations
+    s0 = np.clip(p.to_s(theta_start), lo, hi)
+    if method == "least-squares":
+        s, r, J, iters, ok, msg = levenberg_marquardt(problem, s0, lo, hi, record, max_evaluations, xtol, ftol)
+    else:
+        s, iters, ok, msg = scipy_minimize(problem, s0, lo, hi, record, method, max_evaluations, xtol, ftol)
+        r, J = None, None
+    return {"start": theta_start, "s": s, "r": r, "J": J, "iterations": iters, "converged": ok, "message": msg,
+            "history": record.entries, "forward_solves": problem.forward_solves - solves_before,
+            "newton_iterations": problem.newton_iterations - iterations_before}
+
+
+def _start_on_worker(k: int, theta_start: Any, setup: tuple[Any, ...]) -> dict[str, Any]:
+    """One start of a fit where a Dask worker runs it: the problem is built there again (the
+    body travels without its compiled model), exactly as :func:`estimate` builds it."""
+    (body, target, params, regions, scenarios, gravity, solve, regularization, method, lo, hi, max_evaluations,
+     xtol, ftol, t0) = setup
+    p = Parameters(body, params, regions)
+    problem = Problem(body, p, make_scenarios(body, target, scenarios, gravity, solve), regularization)
+    try:
+        return _fit_from(problem, p, theta_start, method, lo, hi, Recorder(problem, False, None, k, t0),
+                         max_evaluations, xtol, ftol)
+    finally:
+        problem.restore()
+
+
+def _remote_starts(client: Any, start_points: list[Any], first_start: int, history_file: Path | None, bar: Progress,
+                   problem: Problem, setup: tuple[Any, ...]) -> list[dict[str, Any]]:
+    """Every start on the workers of a Dask ``client`` at once; the runs in start order, their
+    solves counted in ``problem`` and their history appended to ``history_file``."""
+    for k, theta_start in enumerate(start_points):
+        problem.params.check(theta_start, f"start {k}")
+    futures = [client.submit(_start_on_worker, first_start + k, theta, setup, pure=False)
+               for k, theta in enumerate(start_points)]
+    runs = []
+    for k, future in enumerate(futures):
+        run = future.result()
+        problem.forward_solves += run["forward_solves"]
+        problem.newton_iterations += run["newton_iterations"]
+        if history_file is not None:
+            with history_file.open("a", encoding="utf-8") as fh:
+                fh.writelines(json.dumps(entry) + "\n" for entry in run["history"])
+        bar.set(problem.forward_solves, postfix=f"start {k + 1}/{len(start_points)} done")
+        runs.append(run)
+    return runs
+
+
 def estimate(
     body: Any,
     target: Any,
@@ -66,6 +118,7 @@ def estimate(
     resume: bool = False,
     progress: bool | None = None,
     options: SolveOptions | None = None,
+    client: Any = None,
     profile: bool | str | None = None,
     profile_values: ArrayLike | None = None,
 ) -> FitResult:
@@ -113,6 +166,12 @@ def estimate(
     options
         ``tolerance``, ``max_iterations`` and ``load_steps`` as one
         :class:`~sorofem.solver.SolveOptions`, which replaces them when given.
+    client
+        A ``dask.distributed.Client``: with more than one start, the starts run on its
+        workers side by side, each an independent fit as without a client (the same path
+        and optimum of every start; the body travels without its compiled model, which
+        each worker builds); the final evaluation runs here. ``verbose`` lines are not
+        printed for remote starts; the history file is written here as starts finish.
     max_evaluations
         Budget of objective evaluations per start (each is one solve per scenario).
     xtol, ftol
@@ -197,28 +256,21 @@ def estimate(
         elif starts is not None:
             start_points += [p.from_user(v, f"starts[{i}]") for i, v in enumerate(starts)]
 
-    runs = []
+    runs: list[dict[str, Any]] = []
     bar = Progress(desc=f"estimate ({method})", unit="solves", enabled=progress)
     problem.progress = bar
     try:
-        for k, theta_start in enumerate(start_points):
-            p.check(theta_start, f"start {k}")
-            if len(start_points) > 1:
-                bar.desc = f"estimate ({method}) start {k + 1}/{len(start_points)}"
-            for sc in scs:  # every start from the same beginning
-                sc.initial = sc.given_initial
-            solves_before = problem.forward_solves
-            record = Recorder(problem, verbose, history_file, first_start + k, t0)
-            s0 = np.clip(p.to_s(theta_start), lo, hi)
-            if method == "least-squares":
-                s, r, J, iters, ok, msg = levenberg_marquardt(problem, s0, lo, hi, record, max_evaluations, xtol, ftol)
-            else:
-                s, iters, ok, msg = scipy_minimize(problem, s0, lo, hi, record, method, max_evaluations, xtol, ftol)
-                r, J = None, None
-            runs.append(
-                {"start": theta_start, "s": s, "r": r, "J": J, "iterations": iters, "converged": ok, "message": msg,
-                 "history": record.entries, "forward_solves": problem.forward_solves - solves_before}
-            )
+        if client is not None and len(start_points) > 1:
+            runs = _remote_starts(client, start_points, first_start, history_file, bar, problem, (
+                body, target, params, regions, scenarios, gravity, solve, regularization, method, lo, hi,
+                max_evaluations, xtol, ftol, t0))
+        else:
+            for k, theta_start in enumerate(start_points):
+                p.check(theta_start, f"start {k}")
+                if len(start_points) > 1:
+                    bar.desc = f"estimate ({method}) start {k + 1}/{len(start_points)}"
+                record = Recorder(problem, verbose, history_file, first_start + k, t0)
+                runs.append(_fit_from(problem, p, theta_start, method, lo, hi, record, max_evaluations, xtol, ftol))
         best = min(runs, key=lambda run: run["history"][-1]["loss"] if run["history"] and math.isfinite(run["history"][-1]["loss"]) else math.inf)
         # Final evaluation at the optimum: residual and the Jacobian for the uncertainty.
         s = best["s"]

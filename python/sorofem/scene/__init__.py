@@ -161,10 +161,12 @@ Examples
 
 from __future__ import annotations
 
-from ._keys import TOP_KEYS, json_schema, schema_text
-from ._scene import Scene
+from ._keys import SCENE, TOP_KEYS, json_schema, schema_text
+from ._scene import PER_SOLVE_CABLE_KEYS, Scene, structure_key
+from ._spec import Checker, Field
 
-__all__ = ["Scene", "json_schema", "schema_text", "TOP_KEYS"]
+__all__ = ["Scene", "json_schema", "schema_text", "TOP_KEYS", "SCENE", "Checker", "Field", "structure_key",
+           "PER_SOLVE_CABLE_KEYS"]
 
 # Documented (and pickled) as members of this package, whichever private module holds them.
 for _public in (Scene, json_schema, schema_text):

@@ -3,12 +3,13 @@ dynamics, target and outputs."""
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -36,7 +37,32 @@ from ._build import (
 from ._keys import SCENE, defaults
 from ._spec import Checker
 
-__all__ = ["Scene"]
+__all__ = ["Scene", "structure_key", "PER_SOLVE_CABLE_KEYS"]
+
+#: The [[cable]] keys a built model takes at every solve (the others shape the model).
+PER_SOLVE_CABLE_KEYS = ("actuation", "stiffness")
+
+
+def structure_key(data: Mapping[str, Any]) -> str:
+    """The tables a scene's expensive objects are built from, as one JSON string: the mesh, the
+    formulation, the supports, the nodal forces, the cables (all but their actuation and
+    stiffness), the material model and the target.
+
+    Two scenes whose checked tables give the same key differ only in values a built model takes
+    at each solve (material values, actuations, cable stiffnesses, gravity, solver and dynamics
+    options), so they can share a mesh and a compiled model (:meth:`Scene.from_data`'s ``like``).
+    """
+    cables = [{k: v for k, v in entry.items() if k not in PER_SOLVE_CABLE_KEYS} for entry in data.get("cable", [])]
+    parts = {
+        "mesh": data.get("mesh"),
+        "formulation": data.get("formulation"),
+        "fixed": data.get("fixed"),
+        "forces": (data.get("loads") or {}).get("forces"),
+        "cable": cables,
+        "material_model": (data.get("material") or {}).get("model"),
+        "target": data.get("target"),
+    }
+    return json.dumps(parts, sort_keys=True, default=str)
 
 
 @dataclass
@@ -102,6 +128,9 @@ class Scene:
     #: The files the scene reads: itself, the mesh file and the ``[target]`` surface files
     #: (``sorofem run`` never writes over them).
     input_files: list[Path] = field(default_factory=list)
+    #: What the expensive objects of the scene are built from (:func:`structure_key`): scenes
+    #: with the same structure can share a mesh and a compiled model (:meth:`from_data`'s ``like``).
+    structure: str = field(default="", repr=False)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> "Scene":
@@ -127,7 +156,6 @@ class Scene:
     def from_toml(cls, text: str, path: str | os.PathLike[str]) -> "Scene":
         """Build a scene from TOML text; relative mesh paths are resolved against ``path``'s folder."""
         path = Path(path)
-        check = Checker(path, text)
         try:
             raw = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
@@ -135,27 +163,74 @@ class Scene:
             raise SceneError(
                 f"invalid TOML: {exc}", path=path, line=int(match.group(1)) if match else None
             ) from None
+        return cls.from_data(raw, path, text=text)
+
+    @classmethod
+    def from_data(
+        cls,
+        raw: Mapping[str, Any],
+        path: str | os.PathLike[str],
+        *,
+        text: str = "",
+        like: "Scene | Sequence[Scene] | None" = None,
+    ) -> "Scene":
+        """Build a scene from its tables as :func:`tomllib.loads` returns them.
+
+        Parameters
+        ----------
+        raw
+            The tables of a scene file (checked here exactly as :meth:`from_toml` checks them).
+        path
+            The scene file they stand for: errors name it, relative paths are resolved
+            against its folder.
+        text
+            The file's text, if any, so that errors can give the line.
+        like
+            Scenes built before (or one): the one with the same :attr:`structure` and folder,
+            if any, lends its mesh, supports, forces, cables, target and compiled model (whose
+            symbolic factorisation is the expensive part), shared through
+            :meth:`sorofem.Body.replace`, instead of their being built again. The scene is the
+            one building from scratch gives: a sweep (:func:`sorofem.sweep`) relies on it to
+            solve many variants of a scene.
+        """
+        path = Path(path)
+        check = Checker(path, text)
         # Structure, types, ranges and allowed values (everything json_schema() says), with
         # defaults filled in; then what needs the mesh and the other files.
         data = SCENE.check(check, raw, "")
         for name in ("formulation", "loads", "solver", "output"):
             if name not in data:
                 data[name] = SCENE.fields[name].spec.check(check, {}, name)
+        structure = structure_key(data)
+        candidates = [like] if isinstance(like, Scene) else list(like or ())
+        like = next((s for s in candidates if s.structure == structure and s.path.parent == path.parent), None)
 
-        mesh = build_mesh(check, data["mesh"], path.parent)
+        mesh = like.mesh if like is not None else build_mesh(check, data["mesh"], path.parent)
         formulation = data["formulation"]["kind"]
         options = {k: v for k, v in data["formulation"].items() if k != "kind"}
         material, regions, owner = build_material(check, data["material"], mesh, formulation)
+        if like is not None:
+            like.body.core_model()  # built now, so that this copy and every later one share it
         try:
-            body = Body(mesh, material, formulation=formulation, **options)
+            body = (like.body.replace(material=material) if like is not None
+                    else Body(mesh, material, formulation=formulation, **options))
         except ParameterError as exc:
             raise check.error(f"material.{exc.parameter or 'youngs_modulus'}", str(exc)) from None
-        apply_fixed(check, data["fixed"], body)
-        gravity = apply_loads(check, data["loads"], body)
-        cables = apply_cables(check, data["cable"], body)
+        if like is not None:
+            gravity, cables = np.array(data["loads"]["gravity"]), like.cables
+            for c, entry in enumerate(data["cable"]):
+                body.set_actuation(c, entry["actuation"])
+                body.set_cable_stiffness(c, entry["stiffness"])
+        else:
+            apply_fixed(check, data["fixed"], body)
+            gravity = apply_loads(check, data["loads"], body)
+            cables = apply_cables(check, data["cable"], body)
         dynamics = build_dynamics(check, data["dynamics"], body) if "dynamics" in data else None
         target, target_files = None, []
-        if "target" in data:
+        if like is not None:
+            target = like.target
+            target_files = [f for f in like.input_files if f not in (like.path, like.mesh.source)]
+        elif "target" in data:
             target, target_files = build_target(check, data["target"], body, path.parent)
         estimate = build_estimate(check, data["estimate"], regions) if "estimate" in data else None
         control = build_control(check, data["control"], body) if "control" in data else None
@@ -178,6 +253,7 @@ class Scene:
             material_region=owner,
             output=output,
             input_files=[p for p in (path, mesh.source, *target_files) if p is not None],
+            structure=structure,
         )
 
     @property

@@ -3,25 +3,31 @@ equilibrium with live cable sliders, or the playback of a time integration.
 
 The view shows the deformed boundary surface coloured by displacement magnitude (viridis, scaled
 to the current maximum) or, chosen in the "colour by" dropdown, by von Mises stress, pressure
-(mixed formulation) or J (diverging maps centred on 0 and 1), the cables as red polylines, the fixed nodes as blue points and,
-optionally, the rest shape. The control panel has one slider per cable that sets its actuation
-alpha and re-solves, warm-started from the last equilibrium (``body.set_actuation(i, alpha)``,
-then :func:`sorofem.solve_static` with ``initial=`` the last result; a jump that does not
-converge is retried by continuation, :func:`sorofem.actuate`), and a dropdown that switches
-between the standard and the mixed formulation. A scene with ``[dynamics]`` is shown at its
-static equilibrium, and its button "simulate [dynamics]" (:meth:`View.simulate`; disabled, with
-a hint, when the scene has none) integrates the motion with the formulation and cable
-actuations set in the page and plays it in the same page with the playback controls below,
-until "back to static" (:meth:`View.show_static`). A trajectory of your own plays with
-:func:`view_trajectory`.
+(mixed formulation) or J (diverging maps centred on 0 and 1), with a colour bar in mm or kPa;
+the cables as red polylines, the fixed nodes as blue points and, optionally, the rest shape or
+the surface as a wireframe in the same colours. Shift + drag on the body pulls the node under
+the pointer with a spring (:meth:`View.grab`, :meth:`View.drag_to`, :meth:`View.release`), as
+runSofa and MuJoCo's viewer do. The control panel has one slider per cable that
+moves its actuation alpha by continuation from the equilibrium shown, in steps of at most
+:data:`sorofem.cables.DEFAULT_ALPHA_STEP` as :func:`sorofem.actuate` does, and a dropdown that
+switches between the standard and the mixed formulation. A scene with ``[dynamics]`` is shown at
+its static equilibrium, and its button "simulate [dynamics]" (:meth:`View.simulate`; disabled,
+with a hint, when the scene has none) integrates the motion with the formulation and cable
+actuations set in the page, showing the steps done and a cancel button, and plays it in the same
+page with the playback controls below, until "back to static" (:meth:`View.show_static`). A
+trajectory of your own plays with :func:`view_trajectory`.
+
+``sorofem view`` (:func:`serve`) gives every browser tab its own view (its own body, sliders,
+checkboxes, playback and camera: :func:`serving.per_client` on viser's client handles);
+:func:`build_view` on a ``viser.ViserServer`` draws one view that every tab shares.
 
 **Playback** (:func:`build_trajectory_view`, :func:`view_trajectory`): a
 :class:`~sorofem.Trajectory` returned by :func:`sorofem.simulate`, or the ``.pvd`` series that
 :meth:`~sorofem.Trajectory.write_pvd` and ``sorofem run`` write, is shown frame by frame with a
 frame slider, a play/pause button, the playback speed (multiples of real time) and a loop
-toggle. Each frame moves the vertices of the one surface mesh, the cables and the
-displacement-coloured surface nodes (one colour scale, 0 .. the largest displacement of the
-whole motion); nothing is re-created.
+toggle. Each frame redraws the one surface, coloured by displacement magnitude (one colour
+scale, 0 .. the largest displacement of the whole motion, shown by a colour bar), and moves the
+cables; nothing is re-created.
 
 Needs the optional extra ``viewer`` (viser, trimesh): ``pip install ".[viewer]"`` from a checkout
 of sorofem (README, "Install"). :func:`build_view` takes any
@@ -61,7 +67,8 @@ from ..scene import Scene
 from . import serving
 from .colours import COLOR_FIELDS, colour_by_magnitude, colour_field, nodal_field
 from .frames import Frames, load_frames
-from .playback import TrajectoryView, build_trajectory_view, view_trajectory
+from .playback import TrajectoryView, build_trajectory_view, simulate_in_chunks, view_trajectory
+from .serving import PerClient, per_client
 from .static_view import View, build_view, rebuild_body
 
 __all__ = [
@@ -77,6 +84,9 @@ __all__ = [
     "TrajectoryView",
     "build_trajectory_view",
     "view_trajectory",
+    "simulate_in_chunks",
+    "PerClient",
+    "per_client",
     "serve",
 ]
 
@@ -86,7 +96,9 @@ def serve(path: str | os.PathLike[str], host: str = "127.0.0.1", port: int = 808
 
     ``PATH`` is a scene (its static equilibrium with cable sliders; with ``trajectory=True`` its
     ``[dynamics]`` are simulated and played), a ``.pvd`` time series, or a folder holding
-    ``trajectory.pvd`` (``sorofem run``'s ``--out`` folder), which is played.
+    ``trajectory.pvd`` (``sorofem run``'s ``--out`` folder), which is played. Each browser tab
+    gets its own view (:func:`per_client`): the scene is solved once, and each tab moves its own
+    copy of the body from that equilibrium.
     """
     viser = serving.require_viser()
     path = Path(path)
@@ -99,21 +111,22 @@ def serve(path: str | os.PathLike[str], host: str = "127.0.0.1", port: int = 808
             if scene.dynamics is None:
                 raise InputError(f"{path}: --trajectory needs a [dynamics] table in the scene")
             source = Frames.from_trajectory(scene.simulate(), source=str(path))
+    if playback or trajectory:
+        frames = load_frames(source)
+        what = f"{path} ({frames.n_frames} frames)"
+
+        def build(client: Any) -> Any:
+            return build_trajectory_view(frames, client, play=True)
+    else:
+        equilibrium = scene.solve()
+        what = str(path)
+
+        def build(client: Any) -> Any:
+            return build_view(scene, client, body=scene.body.replace(), equilibrium=equilibrium)
     server = viser.ViserServer(host=host, port=port, verbose=False)
-    on_stop = None
-    try:
-        if playback or trajectory:
-            view = build_trajectory_view(source, server, play=True)
-            on_stop = view.close
-            what = f"{path} ({view.frames.n_frames} frames)"
-        else:
-            build_view(scene, server)
-            what = str(path)
-    except BaseException:
-        server.stop()
-        raise
+    tabs = per_client(server, build)
     print(f"sorofem view: {what} at http://{host}:{server.get_port()} (Ctrl-C to stop)", flush=True)
-    serving.wait_until_interrupted(server, on_stop)
+    serving.wait_until_interrupted(server, tabs.close)
     return 0
 
 
@@ -124,5 +137,5 @@ __getattr__ = moved(__name__, {"COLOUR_FIELDS": (lambda: COLOR_FIELDS, "sorofem.
 
 # Documented (and pickled) as members of this package, whichever module holds them.
 for _public in (View, build_view, colour_by_magnitude, nodal_field, colour_field, rebuild_body, Frames, load_frames,
-                TrajectoryView, build_trajectory_view, view_trajectory):
+                TrajectoryView, build_trajectory_view, view_trajectory, simulate_in_chunks, PerClient, per_client):
     _public.__module__ = __name__

@@ -1,5 +1,6 @@
 """The playback of a time integration: :class:`TrajectoryView`, :func:`build_trajectory_view` and
-:func:`view_trajectory`."""
+:func:`view_trajectory`; and a scene's ``[dynamics]`` integrated in pieces that report progress
+and can be cancelled (:func:`simulate_in_chunks`, what the scene view's "simulate" runs)."""
 
 from __future__ import annotations
 
@@ -10,19 +11,27 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ..dynamics import Trajectory
-from ..errors import InputError
+from ..body import Body
+from ..dynamics import Trajectory, evaluate_schedule, simulate
+from ..errors import ConvergenceError, InputError
+from ..scene import Scene
+from ..static import StaticResult
 from . import serving
-from .colours import colour_by_magnitude
+from .colours import colour_bar_html, colour_by_magnitude, surface_edges, surface_glb
 from .frames import Frames, load_frames
-from .style import CABLE_COLOUR, FIXED_COLOUR, PLAYBACK_FPS, REST_COLOUR, SPEEDS, SURFACE_COLOUR
+from .serving import CORE_LOCK
+from .style import CABLE_COLOUR, FIXED_COLOUR, PLAYBACK_FPS, REST_COLOUR, SPEEDS, WIREFRAME_THICKNESS
 
-__all__ = ["TrajectoryView", "build_trajectory_view", "view_trajectory"]
+__all__ = ["TrajectoryView", "build_trajectory_view", "view_trajectory", "simulate_in_chunks", "CHUNK_SECONDS"]
+
+#: Wall-clock target of one piece of :func:`simulate_in_chunks` (how often progress is shown
+#: and a cancel is noticed), s.
+CHUNK_SECONDS = 0.25
 
 
 def _speed_label(speed: float) -> str:
@@ -49,12 +58,15 @@ class TrajectoryView:
     loop
         Start again at the end (else stop on the last frame).
     surface
-        The surface mesh handle; its ``vertices`` are the shown frame's surface node positions.
-    colours
-        Surface nodes coloured by displacement magnitude (a point cloud handle).
+        The surface (a GLB node: the frame's surface node positions, coloured by displacement
+        magnitude on one scale for the whole motion).
+    wireframe
+        The surface's edges in the same colours (line segments, shown instead of ``surface``).
+    colour_bar
+        The colour bar (HTML: the map, ``|u|`` in mm from 0 to ``vmax``).
     cables
         One line-segments handle per cable.
-    slider, play_button, speed_dropdown, loop_checkbox, status, header
+    slider, play_button, speed_dropdown, loop_checkbox, wireframe_checkbox, status, header
         The GUI handles.
     frames_shown
         How many frames have been drawn (the initial one included).
@@ -70,17 +82,22 @@ class TrajectoryView:
     speed: float = 1.0
     loop: bool = True
     surface: Any = None
-    colours: Any = None
+    wireframe: Any = None
+    colour_bar: Any = None
     cables: list[Any] = field(default_factory=list)
     rest: Any = None
     slider: Any = None
     play_button: Any = None
     speed_dropdown: Any = None
     loop_checkbox: Any = None
+    wireframe_checkbox: Any = None
     status: Any = None
     #: The markdown line above the controls (what is played).
     header: Any = None
     frames_shown: int = 0
+    #: The surface's unique edges ``(e, 2)`` in surface-node numbering (the wireframe's segments).
+    surface_edges: NDArray[np.int64] = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int64),
+                                          repr=False)
     _lock: threading.RLock = field(default_factory=threading.RLock, repr=False)
     _thread: threading.Thread | None = field(default=None, repr=False)
     _closed: bool = field(default=False, repr=False)
@@ -99,26 +116,37 @@ class TrajectoryView:
 
     # -- frames ----------------------------------------------------------------------
 
-    def _colours(self, frame: int) -> NDArray[np.uint8]:
+    def surface_colours(self, frame: int) -> NDArray[np.uint8]:
+        """RGBA colours ``(k, 4)`` of the surface nodes at ``frame``: displacement magnitude on
+        viridis, 0 .. ``vmax``."""
         displacement = self.frames.positions[frame][self.surface_nodes] - self.frames.mesh.points[self.surface_nodes]
-        return colour_by_magnitude(np.linalg.norm(displacement, axis=1), self.vmax)[:, :3]
+        return colour_by_magnitude(np.linalg.norm(displacement, axis=1), self.vmax)
+
+    def _surface_glb(self, frame: int) -> bytes:
+        vertices = self.frames.positions[frame][self.surface_nodes]
+        return surface_glb(vertices, self.surface_faces, self.surface_colours(frame))
+
+    def _wireframe(self, frame: int) -> tuple[NDArray[np.float32], NDArray[np.uint8]]:
+        vertices = self.frames.positions[frame][self.surface_nodes]
+        return (vertices[self.surface_edges].astype(np.float32),
+                self.surface_colours(frame)[:, :3][self.surface_edges])
 
     def _cable_segments(self, frame: int, c: int) -> NDArray[np.float32]:
         points = self.frames.cable_points[frame][c]
         return np.stack([points[:-1], points[1:]], axis=1).astype(np.float32)
 
     def show(self, frame: int) -> None:
-        """Show frame ``frame`` (clamped to the range): move the surface, the coloured nodes
-        and the cables, and update the status. Does not move the slider (set ``slider.value``
-        to do both)."""
+        """Show frame ``frame`` (clamped to the range): move and colour the surface (or its
+        wireframe, whichever is shown) and move the cables, and update the status. Does not
+        move the slider (set ``slider.value`` to do both)."""
         with self._lock:
             frame = min(max(int(frame), 0), self.frames.n_frames - 1)
             self.frame = frame
-            if self.surface is not None:
-                self.surface.vertices = self.surface_vertices.astype(np.float32)
-            if self.colours is not None:
-                self.colours.points = self.surface_vertices.astype(np.float32)
-                self.colours.colors = self._colours(frame)
+            # Only the shown one of surface and wireframe is redrawn (the other on the switch).
+            if self.surface is not None and self.surface.visible:
+                self.surface.glb_data = self._surface_glb(frame)
+            if self.wireframe is not None and self.wireframe.visible:
+                self.wireframe.points, self.wireframe.colors = self._wireframe(frame)
             for c, handle in enumerate(self.cables):
                 handle.points = self._cable_segments(frame, c)
             if self.status is not None:
@@ -129,7 +157,7 @@ class TrajectoryView:
         f, k = self.frames, self.frame
         u = np.linalg.norm(f.positions[k] - f.mesh.points, axis=1).max(initial=0.0)
         lines = [f"frame {k} / {f.n_frames - 1}, **t = {f.times[k]:.4g} s**",
-                 f"max |u| = {u * 1e3:.3g} mm (colours 0 .. {self.vmax * 1e3:.3g} mm over the motion)"]
+                 f"max |u| = {u * 1e3:.3g} mm (colour scale: the whole motion)"]
         if f.kinetic_energy is not None:
             lines.append(f"kinetic energy {f.kinetic_energy[k]:.3e} J")
         if f.actuation is not None:
@@ -271,7 +299,8 @@ def build_trajectory_view(
         :meth:`~sorofem.Trajectory.write_pvd`, or a folder with ``trajectory.pvd`` (see
         :func:`load_frames`).
     server
-        Where to draw; nothing is started or blocked here.
+        Where to draw: a ``viser.ViserServer`` (every tab sees the same playback) or a
+        ``viser.ClientHandle`` (one tab's own); nothing is started or blocked here.
     speed
         Initial playback speed, multiples of real time.
     loop
@@ -308,20 +337,18 @@ def build_trajectory_view(
     size = float(np.linalg.norm(hi - lo)) or 1.0
     centre = 0.5 * (lo + hi)
     server.scene.set_up_direction("+z")
-    server.initial_camera.look_at = tuple(centre)
-    server.initial_camera.position = tuple(centre + size * np.array([0.35, -1.1, 0.55]))
-    first = frames.positions[0][nodes].astype(np.float32)
-    view.surface = server.scene.add_mesh_simple("/motion/surface", first, view.surface_faces, color=SURFACE_COLOUR,
-                                                side="double")
-    view.colours = server.scene.add_point_cloud(
-        "/motion/displacement", first, view._colours(0), point_size=0.008 * size, point_shape="circle",
-        precision="float32",
-    )
+    serving.place_camera(server, centre, centre + size * np.array([0.35, -1.1, 0.55]))
+    view.surface_edges = surface_edges(view.surface_faces)
+    view.surface = server.scene.add_glb("/motion/surface", glb_data=view._surface_glb(0))
+    points, colours = view._wireframe(0)
+    view.wireframe = server.scene.add_line_segments("/motion/wireframe", points, colours,
+                                                    thickness=WIREFRAME_THICKNESS, thickness_units="screen",
+                                                    visible=False)
     view.rest = server.scene.add_mesh_simple(
         "/motion/rest", mesh.points[nodes].astype(np.float32), view.surface_faces, color=REST_COLOUR,
         wireframe=True, visible=False,
     )
-    view._handles += [view.surface, view.colours, view.rest]
+    view._handles += [view.surface, view.wireframe, view.rest]
     if frames.fixed_nodes.size:
         view._handles.append(server.scene.add_point_cloud(
             "/motion/fixed", mesh.points[frames.fixed_nodes].astype(np.float32), FIXED_COLOUR,
@@ -357,20 +384,22 @@ def build_trajectory_view(
         view.loop = bool(event.target.value)
 
     view.loop_checkbox.on_update(_set_loop)
-    wireframe = gui.add_checkbox("wireframe (see the cables)", initial_value=False)
-    coloured = gui.add_checkbox("colour the nodes by |u|", initial_value=True)
+    wireframe = view.wireframe_checkbox = gui.add_checkbox("wireframe (see the cables)", initial_value=False)
     show_rest = gui.add_checkbox("show rest shape", initial_value=False)
 
     def _toggle(_: Any) -> None:
-        view.surface.wireframe = wireframe.value
-        view.colours.visible = coloured.value
-        view.rest.visible = show_rest.value
+        with view._lock:
+            view.surface.visible = not wireframe.value
+            view.wireframe.visible = wireframe.value
+            view.rest.visible = show_rest.value
+            view.show(view.frame)  # draws the one now shown
 
-    for box in (wireframe, coloured, show_rest):
+    for box in (wireframe, show_rest):
         box.on_update(_toggle)
+    view.colour_bar = gui.add_html(colour_bar_html("displacement", 0.0, vmax))
     view.status = gui.add_markdown("")
-    view._handles += [view.slider, view.play_button, view.speed_dropdown, view.loop_checkbox, wireframe, coloured,
-                      show_rest, view.status]
+    view._handles += [view.slider, view.play_button, view.speed_dropdown, view.loop_checkbox, wireframe, show_rest,
+                      view.colour_bar, view.status]
     view.show(0)
     if play:
         view.play()
@@ -411,3 +440,111 @@ def view_trajectory(
     if block:
         serving.wait_until_interrupted(server, view.close)
     return view
+
+
+def _has_free_cable_nodes(body: Body) -> bool:
+    """Whether a cable of ``body`` has nodes of its own (``outside="free"``), whose velocities a
+    restarted :func:`sorofem.simulate` does not carry over."""
+    if not any(getattr(c, "outside", "error") == "free" for c in body.cables):
+        return False
+    try:
+        return any(p.kind == "free" for cable in body.cable_placements() for p in cable)
+    except InputError:
+        return True  # the simulation reports the problem
+
+
+def simulate_in_chunks(
+    scene: Scene,
+    body: Body,
+    equilibrium: StaticResult | None = None,
+    *,
+    on_progress: Callable[[int, int, float], None] | None = None,
+    cancel: threading.Event | None = None,
+) -> Trajectory | None:
+    """:meth:`Scene.simulate` of ``body`` in consecutive pieces of about :data:`CHUNK_SECONDS`,
+    each continuing from the last one's positions and velocities, so that the caller sees the
+    progress and can stop: the same frames as one call (a piece spans whole ``save_every``
+    intervals).
+
+    Parameters
+    ----------
+    scene
+        A scene with ``[dynamics]`` (its time step, steps, schedule, damping, gravity, solver).
+    body
+        The body to integrate (with ``initial = "static"``, from ``equilibrium``, solved here
+        when None).
+    on_progress
+        Called after each piece with ``(steps done, steps, simulated time in s)``.
+    cancel
+        When set, the run stops after the piece under way and None is returned.
+
+    Returns
+    -------
+    Trajectory or None
+        The whole motion (``timings["simulate"]`` the wall time of all pieces), or None when
+        cancelled.
+
+    Raises
+    ------
+    InputError
+        The scene has no ``[dynamics]`` table.
+    ConvergenceError
+        A time step failed; the message names the step counted from the start.
+    """
+    d = scene.dynamics
+    if d is None:
+        raise InputError(f"{scene.path}: the scene has no [dynamics] table")
+    dt, steps, save_every = float(d["dt"]), int(d["steps"]), int(d["save_every"])
+    initial: Any = None
+    if d["initial"] == "static":
+        initial = equilibrium if equilibrium is not None else scene.solve(body=body)
+    if _has_free_cable_nodes(body):  # one piece: free cable nodes do not survive a restart
+        with CORE_LOCK:
+            trajectory = scene.simulate(body=body, equilibrium=initial, progress=False)
+        if on_progress is not None:
+            on_progress(steps, steps, steps * dt)
+        return None if cancel is not None and cancel.is_set() else trajectory
+    alphas = evaluate_schedule(body, d["actuation"], dt, steps)
+    options = dict(gravity=scene.gravity, damping=(d["mass_damping"], d["stiffness_damping"]),
+                   tolerance=scene.solve_options.tolerance, max_iterations=scene.solve_options.max_iterations,
+                   progress=False)
+    pieces: list[Trajectory] = []
+    velocity = None
+    done, size = 0, save_every
+    start = time.perf_counter()
+    while done < steps:
+        if cancel is not None and cancel.is_set():
+            return None
+        n = min(size, steps - done)
+        tick = time.perf_counter()
+        try:
+            with CORE_LOCK:  # one piece at a time on a compiled model shared between tabs
+                    piece = simulate(body, dt, n, alphas[done:done + n], initial=initial, initial_velocity=velocity,
+                                 save_every=save_every, **options)
+        except ConvergenceError as err:
+            err.args = (f"in the steps {done + 1} .. {done + n} (t = {done * dt:.4g} .. {(done + n) * dt:.4g} s): "
+                        f"{err.args[0] if err.args else err}", *err.args[1:])
+            raise
+        pieces.append(piece)
+        initial, velocity = piece.final_positions, piece.velocities
+        done += n
+        if on_progress is not None:
+            on_progress(done, steps, done * dt)
+        per_step = (time.perf_counter() - tick) / n
+        size = save_every * max(1, int(CHUNK_SECONDS / max(per_step, 1e-9)) // save_every)
+    return _join(body, dt, pieces, alphas, time.perf_counter() - start)
+
+
+def _join(body: Body, dt: float, pieces: list[Trajectory], alphas: NDArray[np.float64], elapsed: float) -> Trajectory:
+    """One trajectory of consecutive pieces (each piece's first frame is the previous one's last)."""
+    offsets = np.cumsum([0.0] + [p.times[-1] for p in pieces[:-1]])
+    out = {
+        "times": np.concatenate([p.times[k > 0:] + t for k, (p, t) in enumerate(zip(pieces, offsets))]),
+        "positions": np.concatenate([p.positions[k > 0:] for k, p in enumerate(pieces)]),
+        "kinetic_energy": np.concatenate([p.kinetic_energy[k > 0:] for k, p in enumerate(pieces)]),
+        "cable_points": [frame for k, p in enumerate(pieces) for frame in p.cable_points[k > 0:]],
+        "iterations": np.concatenate([p.iterations for p in pieces]),
+        "cutbacks": sum(p.cutbacks for p in pieces),
+        "velocities": pieces[-1].velocities,
+    }
+    return Trajectory(body, dt, out, alphas, elapsed)

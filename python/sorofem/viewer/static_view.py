@@ -1,10 +1,12 @@
 """The interactive view of a scene's static equilibrium: cable sliders, the formulation, the colour
-field, and the button that simulates the scene's ``[dynamics]`` and plays the motion in place."""
+field and its colour bar, and the button that simulates the scene's ``[dynamics]`` (with its
+progress and a cancel button) and plays the motion in place."""
 
 from __future__ import annotations
 
-import io
+import math
 import threading
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -12,14 +14,28 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..body import FORMULATIONS, Body
-from ..errors import ConvergenceError, InputError, SorofemError
+from ..cables import DEFAULT_ALPHA_STEP
+from ..errors import InputError, SorofemError
 from ..plot import COLOR_FIELDS
 from ..scene import Scene
 from ..static import StaticResult, actuate
-from .colours import colour_field, nodal_field
+from .colours import colour_bar_html, colour_field, colour_range, nodal_field, surface_edges, surface_glb
 from .frames import Frames
-from .playback import TrajectoryView, build_trajectory_view
-from .style import ALPHA_RANGE, ALPHA_STEP, CABLE_COLOUR, FIXED_COLOUR, REST_COLOUR, SIMULATE_LABEL
+from .playback import TrajectoryView, build_trajectory_view, simulate_in_chunks
+from .serving import CORE_LOCK, place_camera
+from .style import (
+    ALPHA_RANGE,
+    ALPHA_STEP,
+    CABLE_COLOUR,
+    DRAG_COLOUR,
+    DRAG_ITERATIONS,
+    DRAG_STIFFNESS_PER_MU,
+    DRAG_TOLERANCE,
+    FIXED_COLOUR,
+    REST_COLOUR,
+    SIMULATE_LABEL,
+    WIREFRAME_THICKNESS,
+)
 
 __all__ = ["View", "build_view", "rebuild_body"]
 
@@ -43,13 +59,15 @@ class View:
     Attributes
     ----------
     server
-        The ``viser.ViserServer``.
+        Where it is drawn: a ``viser.ViserServer`` (one view every tab shares) or a
+        ``viser.ClientHandle`` (one tab's own view, see :func:`sorofem.viewer.serve`).
     body
         The body being solved (replaced when the formulation changes).
     result
         The last equilibrium shown.
     sliders
-        One actuation slider per cable, in cable order; setting ``.value`` re-solves.
+        One actuation slider per cable, in cable order; setting ``.value`` moves the cable
+        there from the last equilibrium (:meth:`set_actuation`).
     formulation
         The standard/mixed dropdown; setting ``.value`` rebuilds the body and re-solves.
     surface
@@ -60,6 +78,11 @@ class View:
         The button that simulates the scene's ``[dynamics]`` and plays it in the page
         (:meth:`simulate`), the :class:`TrajectoryView` shown meanwhile (None at the static
         view) and its "back to static" button (:meth:`show_static`).
+    progress_bar, cancel_button
+        Shown while a simulation runs: its progress (percent of the steps) and the button
+        that stops it (:meth:`cancel`).
+    colour_bar
+        HTML: the colour map of ``colour_by`` with its range and unit.
     """
 
     server: Any
@@ -71,7 +94,8 @@ class View:
     sliders: list[Any] = field(default_factory=list)
     formulation: Any = None
     surface: Any = None
-    #: The deformed surface as a wireframe (shown instead of ``surface`` to see the cables inside).
+    #: The deformed surface's edges in the surface's colours (line segments; shown instead of
+    #: ``surface`` to see the cables inside).
     wireframe: Any = None
     cables: list[Any] = field(default_factory=list)
     status: Any = None
@@ -88,7 +112,38 @@ class View:
     #: The field the surface is coloured by (one of :data:`COLOR_FIELDS`) and its dropdown.
     colour_by: str = "displacement"
     colour_dropdown: Any = None
-    _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+    colour_bar: Any = None
+    #: The "wireframe (see the cables)" checkbox.
+    wireframe_checkbox: Any = None
+    progress_bar: Any = field(default=None, repr=False)  # viser's repr of it fails
+    cancel_button: Any = None
+    #: Alpha steps and Newton iterations (summed over the steps) of the last slider move.
+    move_steps: int = 0
+    move_iterations: int = 0
+    #: The surface's unique edges ``(e, 2)`` in surface-node numbering (the wireframe's segments).
+    surface_edges: NDArray[np.int64] = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int64),
+                                          repr=False)
+    _lock: threading.RLock = field(default_factory=threading.RLock, repr=False)
+    #: Slider targets not yet reached, ``{cable: alpha}``: a drag that goes on while a move runs
+    #: redirects it instead of queueing one solve per slider position.
+    _targets: dict[int, float] = field(default_factory=dict, repr=False)
+    _targets_lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+    _moving: bool = field(default=False, repr=False)
+    _cancel: threading.Event = field(default_factory=threading.Event, repr=False)
+    _closed: bool = field(default=False, repr=False)
+    #: Stiffness of the spring that pulls a grabbed node towards the pointer, N/m.
+    drag_stiffness: float = 0.0
+    #: The grabbed node (shift + drag on the surface), or None; its spring's anchor (the
+    #: pointer, m) and force on the node (N).
+    dragged: int | None = None
+    drag_anchor: NDArray[np.float64] | None = field(default=None, repr=False)
+    drag_force: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3), repr=False)
+    #: The spring drawn from the grabbed node to the pointer (line segments, hidden otherwise).
+    drag_line: Any = field(default=None, repr=False)
+    #: Node displacement per unit force at the grabbed node, ``(3, 3)`` m/N, measured at the grab.
+    _compliance: NDArray[np.float64] | None = field(default=None, repr=False)
+    _pending_anchor: NDArray[np.float64] | None = field(default=None, repr=False)
+    _pulling: bool = field(default=False, repr=False)
     #: The static view's scene nodes and controls (hidden while a motion plays).
     _static_nodes: list[Any] = field(default_factory=list, repr=False)
     _static_controls: list[Any] = field(default_factory=list, repr=False)
@@ -103,34 +158,72 @@ class View:
     # -- solving -------------------------------------------------------------------
 
     def _solve(self, body: Body, initial: StaticResult | None) -> StaticResult:
-        return self.scene.solve(body=body, initial=initial)
+        with CORE_LOCK:
+            return self.scene.solve(body=body, initial=initial)
 
     def set_actuation(self, cable: int, alpha: float) -> None:
-        """Set cable ``cable``'s actuation and re-solve from the last equilibrium (what the slider
-        calls). A jump that fails is retried by continuation from the previous alpha."""
+        """Move cable ``cable`` to actuation ``alpha`` (what its slider calls) by continuation
+        from the equilibrium shown, each solve warm-started from the last one and each
+        equilibrium shown as it is reached; a step that fails is halved, as
+        :func:`sorofem.actuate` does.
+
+        The standard formulation goes in one step. The mixed one goes in steps of at most
+        :data:`sorofem.cables.DEFAULT_ALPHA_STEP`: its Newton iterations grow fast with the
+        step (the cable cantilever from alpha 0.3 to 0.7: 153 iterations in one step, 65 in
+        eight), while the standard one's do not (8 in one step, 46 in eight).
+
+        A new target set meanwhile (the slider dragged on) redirects the move. A cable that
+        cannot get there keeps the last equilibrium reached and the status says so."""
+        with self._targets_lock:
+            self._targets[cable] = float(alpha)
+            if self._moving:
+                return  # the move under way takes the new target at its next step
+            self._moving = True
+        try:
+            while True:
+                with self._targets_lock:
+                    if not self._targets:
+                        self._moving = False
+                        return
+                    cable, alpha = self._targets.popitem()
+                self._move(cable, alpha)
+        except BaseException:
+            with self._targets_lock:
+                self._moving = False
+            raise
+
+    def _move(self, cable: int, alpha: float) -> None:
         with self._lock:
-            previous = self.body.actuations[cable]
-            if alpha == previous:
-                return
-            self.body.set_actuation(cable, alpha)
-            try:
-                result = self._solve(self.body, self.result)
-            except ConvergenceError:
-                self.body.set_actuation(cable, previous)
+            steps = iterations = 0
+            largest = DEFAULT_ALPHA_STEP if self.body.formulation == "mixed" else math.inf
+            while (current := self.body.actuations[cable]) != alpha:
+                with self._targets_lock:
+                    alpha = self._targets.pop(cable, alpha)
+                if alpha == current:
+                    break
+                step = current + math.copysign(min(abs(alpha - current), largest), alpha - current)
+                if abs(alpha - step) < 1e-12:
+                    step = alpha
                 try:
-                    result = actuate(
-                        self.body, cable, alpha, self.scene.gravity, initial=self.result,
-                        tolerance=self.scene.solve_options.tolerance,
-                        max_iterations=self.scene.solve_options.max_iterations,
-                    )[-1]
+                    with CORE_LOCK:
+                        path = actuate(self.body, cable, [step], self.scene.gravity, initial=self.result,
+                                       tolerance=self.scene.solve_options.tolerance,
+                                       max_iterations=self.scene.solve_options.max_iterations)
                 except SorofemError as exc:
-                    self.body.set_actuation(cable, previous)
-                    self._report_error(f"cable {cable}: no equilibrium at alpha = {alpha:g} ({exc}); kept alpha = {previous:g}")
+                    reached = getattr(exc, "results", None) or []
+                    if reached:
+                        self._show(reached[-1])
+                    self._report_error(f"cable {cable}: no equilibrium at alpha = {step:g} ({exc}); kept alpha = "
+                                       f"{self.body.actuations[cable]:g}")
                     return
-            self._show(result)
+                steps += len(path)
+                iterations += sum(r.report.iterations for r in path)
+                self.move_steps, self.move_iterations = steps, iterations
+                self._show(path[-1])
 
     def set_formulation(self, formulation: str) -> None:
-        """Rebuild the body in ``formulation`` ("standard" or "mixed") and re-solve."""
+        """Rebuild the body in ``formulation`` ("standard" or "mixed") and re-solve, warm-started
+        from the equilibrium shown."""
         with self._lock:
             if formulation == self.body.formulation:
                 return
@@ -143,6 +236,124 @@ class View:
             self.body = body
             self._show(result)
 
+    # -- pulling a node with a spring ---------------------------------------------------
+
+    def grab(self, point: Any) -> int:
+        """Grab the surface node nearest to ``point`` ``(3,)`` m (where a shift + drag on the
+        surface starts) with a spring of stiffness :attr:`drag_stiffness`, anchored there.
+
+        Its compliance (node displacement per unit force, ``(3, 3)``) is measured by three
+        small probe solves; :meth:`drag_to` uses it to solve the spring's force.
+
+        Returns
+        -------
+        int
+            The grabbed node.
+        """
+        with self._lock:
+            if self.dragged is not None:
+                self._release()
+            point = np.asarray(point, dtype=np.float64).reshape(3)
+            vertices = self.surface_vertices
+            node = int(self.surface_nodes[np.argmin(np.linalg.norm(vertices - point, axis=1))])
+            lo, hi = self.body.mesh.bounds
+            probe = 1e-4 * self.drag_stiffness * float(np.linalg.norm(hi - lo))
+            compliance = np.zeros((3, 3))
+            for axis in range(3):
+                force = np.zeros(3)
+                force[axis] = probe
+                self.body.add_force([node], force)
+                try:
+                    probed = self._solve(self.body, self.result)
+                finally:
+                    self.body.add_force([node], -force)
+                compliance[:, axis] = (probed.positions[node] - self.result.positions[node]) / probe
+            self.dragged, self._compliance = node, compliance
+            self.drag_anchor = self.result.positions[node].copy()
+            self.drag_force = np.zeros(3)
+            return node
+
+    def drag_to(self, point: Any) -> None:
+        """Move the grabbed node's spring anchor to ``point`` ``(3,)`` m and solve for the
+        equilibrium in which the node carries the spring force ``k (anchor - x_node)``.
+
+        The force is found by a quasi-Newton iteration on ``F = k (p - x(F))``: the Jacobian
+        ``I + k C`` starts from the compliance ``C`` measured at the grab and follows Broyden's
+        update (one warm-started solve per iteration, at most ``DRAG_ITERATIONS``). Anchors
+        that arrive while it runs (a drag goes on) redirect it: the last one wins."""
+        with self._targets_lock:
+            self._pending_anchor = np.asarray(point, dtype=np.float64).reshape(3)
+            if self._pulling:
+                return
+            self._pulling = True
+        try:
+            while True:
+                with self._targets_lock:
+                    anchor, self._pending_anchor = self._pending_anchor, None
+                    if anchor is None:
+                        self._pulling = False
+                        return
+                self._pull(anchor)
+        except BaseException:
+            with self._targets_lock:
+                self._pulling = False
+            raise
+
+    def _pull(self, anchor: NDArray[np.float64]) -> None:
+        with self._lock:
+            node, compliance = self.dragged, self._compliance
+            if node is None or compliance is None:
+                return
+            self.drag_anchor = anchor
+            k = self.drag_stiffness
+            result = self.result
+            for _ in range(DRAG_ITERATIONS):
+                residual = self.drag_force - k * (anchor - result.positions[node])
+                if np.linalg.norm(residual) <= DRAG_TOLERANCE * max(np.linalg.norm(self.drag_force), 1e-12):
+                    break
+                step = -np.linalg.solve(np.eye(3) + k * compliance, residual)
+                self.body.add_force([node], step)
+                try:
+                    solved = self._solve(self.body, result)
+                except SorofemError as exc:
+                    self.body.add_force([node], -step)
+                    self._report_error(f"pulling node {node}: no equilibrium ({exc}); kept the last one")
+                    break
+                # Broyden's update keeps the compliance true to the secant as the body deforms.
+                moved = solved.positions[node] - result.positions[node]
+                compliance = compliance + np.outer(moved - compliance @ step, step) / float(step @ step)
+                self.drag_force = self.drag_force + step
+                result = solved
+            self._compliance = compliance
+            self._show(result)
+
+    def release(self) -> None:
+        """Let go of the grabbed node (the end of a shift + drag): its spring force is removed
+        and the body re-solved."""
+        with self._lock:
+            self._release()
+
+    def _release(self) -> None:
+        if self.dragged is None:
+            return
+        self.body.add_force([self.dragged], -self.drag_force)
+        self.dragged, self.drag_anchor, self._compliance = None, None, None
+        self.drag_force = np.zeros(3)
+        try:
+            result = self._solve(self.body, self.result)
+        except SorofemError as exc:
+            self._report_error(f"release: no equilibrium ({exc})")
+            return
+        self._show(result)
+
+    def _on_drag(self, event: Any) -> None:
+        if event.phase == "start":
+            self.grab(event.start_position)
+        elif event.phase == "update" and self.dragged is not None:
+            self.drag_to(event.end_position)
+        elif event.phase == "end":
+            self.release()
+
     # -- the motion --------------------------------------------------------------------
 
     def simulate(self, play: bool = True) -> TrajectoryView | None:
@@ -151,15 +362,17 @@ class View:
 
         The body is the one shown: its formulation and the cable actuations set with the
         sliders (cables without ``[dynamics] actuation`` keyframes hold them); with
-        ``initial = "static"`` the motion starts from the equilibrium shown. The playback
-        (:func:`build_trajectory_view`, with a "back to static" button) replaces the static
-        view's surface and controls until :meth:`show_static`.
+        ``initial = "static"`` the motion starts from the equilibrium shown. While it runs
+        (in pieces, :func:`simulate_in_chunks`) the page shows the steps done and a cancel
+        button (:meth:`cancel`). The playback (:func:`build_trajectory_view`, with a "back to
+        static" button) then replaces the static view's surface and controls until
+        :meth:`show_static`.
 
         Returns
         -------
         TrajectoryView or None
-            The playback (``self.motion``); None when the simulation failed (the error is in the
-            status, and the static view stays).
+            The playback (``self.motion``); None when the simulation failed or was cancelled
+            (the status says which, and the static view stays).
 
         Raises
         ------
@@ -172,17 +385,32 @@ class View:
         with self._lock:
             if self.motion is not None:
                 return self.motion
+            self._cancel.clear()
             self._set_busy(True)
-            if self.status is not None:
-                self.status.content = self._summary() + (
-                    f"  \n**simulating** {d['steps']} steps of {d['dt']:g} s ...")
+            started = time.perf_counter()
+            reached = [0]
+
+            def progress(done: int, steps: int, t: float) -> None:
+                reached[0] = done
+                if self.progress_bar is not None:
+                    self.progress_bar.value = 100.0 * done / steps
+                if self.status is not None:
+                    self.status.content = self._summary() + (
+                        f"  \n**simulating**: step {done} of {steps}, t = {t:.4g} s, "
+                        f"{time.perf_counter() - started:.1f} s elapsed")
+
+            progress(0, d["steps"], 0.0)
             try:
-                trajectory = self.scene.simulate(body=self.body, equilibrium=self.result)
+                trajectory = simulate_in_chunks(self.scene, self.body, self.result, on_progress=progress,
+                                                cancel=self._cancel)
             except SorofemError as exc:
                 self._set_busy(False)
                 self._report_error(f"simulation failed: {exc}")
                 return None
             self._set_busy(False)
+            if trajectory is None:
+                self._report_error(f"simulation cancelled after {reached[0]} of {d['steps']} steps", label="cancelled")
+                return None
             if self.status is not None:
                 self.status.content = self._summary()
             self.simulations += 1
@@ -200,6 +428,11 @@ class View:
             motion.play()
         return motion
 
+    def cancel(self) -> None:
+        """Stop the simulation under way after its current piece (the cancel button); the
+        static view stays. Nothing happens when none runs."""
+        self._cancel.set()
+
     def show_static(self) -> None:
         """Remove the playback of :meth:`simulate` and show the static view again (the "back to
         static" button); nothing to do when it is shown."""
@@ -210,14 +443,29 @@ class View:
             motion.remove()
             self._show_static_view(True)
 
+    def close(self) -> None:
+        """Cancel a simulation under way and stop a playback (a tab that goes away); the
+        server is the caller's to stop."""
+        self._closed = True
+        self._cancel.set()
+        with self._lock:
+            if self.motion is not None:
+                self.motion.close()
+
     def _set_busy(self, busy: bool) -> None:
-        """Disable the static controls while a simulation runs."""
+        """Disable the static controls while a simulation runs; show its progress and the
+        cancel button meanwhile."""
         for handle in self._static_controls:
             if hasattr(handle, "disabled") and handle is not self.simulate_button:
                 handle.disabled = busy
         if self.simulate_button is not None:
             self.simulate_button.disabled = busy
             self.simulate_button.label = "simulating ..." if busy else SIMULATE_LABEL
+        for handle in (self.progress_bar, self.cancel_button):
+            if handle is not None:
+                handle.visible = busy
+        if self.cancel_button is not None:
+            self.cancel_button.disabled = False
 
     def _show_static_view(self, visible: bool) -> None:
         for handle in self._static_nodes + self._static_controls:
@@ -227,15 +475,10 @@ class View:
 
     # -- drawing -------------------------------------------------------------------
 
-    def _surface_glb(self) -> bytes:
-        import trimesh
-
+    def surface_colours(self) -> NDArray[np.uint8]:
+        """RGBA colours ``(k, 4)`` of the surface nodes: ``colour_by`` on its map."""
         values, _ = nodal_field(self.result, self.colour_by)
-        colours, _ = colour_field(values[self.surface_nodes], self.colour_by)
-        mesh = trimesh.Trimesh(self.surface_vertices, self.surface_faces, vertex_colors=colours, process=False)
-        with io.BytesIO() as buffer:
-            mesh.export(buffer, file_type="glb")
-            return buffer.getvalue()
+        return colour_field(values[self.surface_nodes], self.colour_by)[0]
 
     def _cable_segments(self, c: int) -> NDArray[np.float64]:
         points = self.result.cable_points[c]
@@ -266,12 +509,25 @@ class View:
                 self.colour_dropdown.value = self.colour_by
         self.result = result
         self.solves += int(count)
+        if self._closed:
+            return  # the tab has gone: nothing to draw on
+        colours = self.surface_colours()
+        vertices = self.surface_vertices
         if self.surface is not None:
-            self.surface.glb_data = self._surface_glb()
+            self.surface.glb_data = surface_glb(vertices, self.surface_faces, colours)
         if self.wireframe is not None:
-            self.wireframe.vertices = self.surface_vertices.astype(np.float32)
+            self.wireframe.points = vertices[self.surface_edges].astype(np.float32)
+            self.wireframe.colors = colours[:, :3][self.surface_edges]
+        if self.colour_bar is not None:
+            values, _ = nodal_field(result, self.colour_by)
+            self.colour_bar.content = colour_bar_html(self.colour_by, *colour_range(values[self.surface_nodes],
+                                                                                    self.colour_by))
         for c, handle in enumerate(self.cables):
             handle.points = self._cable_segments(c).astype(np.float32)
+        if self.drag_line is not None:
+            if self.dragged is not None and self.drag_anchor is not None:
+                self.drag_line.points = np.array([[result.positions[self.dragged], self.drag_anchor]], dtype=np.float32)
+            self.drag_line.visible = self.dragged is not None
         if self.status is not None:
             self.status.content = self._summary()
 
@@ -282,28 +538,45 @@ class View:
             f"{r.report.timings.get('total', float('nan')) * 1e3:.0f} ms",
             f"max |u| = {r.max_displacement * 1e3:.3g} mm",
         ]
-        values, label = nodal_field(r, self.colour_by)
-        lines.append(f"colours: {label}, {colour_field(values[self.surface_nodes], self.colour_by)[1]}")
+        if self.move_steps:
+            lines.append(f"last slider move: {self.move_steps} alpha step(s), {self.move_iterations} Newton iterations")
         for c, tension in enumerate(r.cable_tensions):
             lines.append(f"cable {c}: alpha {r.actuations[c]:.3f}, tension {tension.min():.3g} .. {tension.max():.3g} N")
+        if self.dragged is not None:
+            lines.append(f"pulling node {self.dragged} with {np.linalg.norm(self.drag_force):.3g} N")
         return "  \n".join(lines)
 
-    def _report_error(self, message: str) -> None:
+    def _report_error(self, message: str, label: str = "error") -> None:
         if self.status is not None:
-            self.status.content = self._summary() + f"  \n**error**: {message}"
+            self.status.content = self._summary() + f"  \n**{label}**: {message}"
 
 
-def build_view(scene: Scene, server: Any, *, alpha_range: tuple[float, float] = ALPHA_RANGE) -> View:
-    """Solve ``scene`` and put the interactive view of it on ``server`` (a ``viser.ViserServer``).
+def build_view(
+    scene: Scene,
+    server: Any,
+    *,
+    alpha_range: tuple[float, float] = ALPHA_RANGE,
+    body: Body | None = None,
+    equilibrium: StaticResult | None = None,
+) -> View:
+    """Solve ``scene`` and put the interactive view of it on ``server``.
 
     Parameters
     ----------
     scene
-        A :class:`sorofem.Scene`; its body is solved (and modified by the sliders) in place.
+        A :class:`sorofem.Scene`.
     server
-        Where to draw; nothing is started or blocked here.
+        Where to draw: a ``viser.ViserServer`` (every tab shares the view: its sliders,
+        checkboxes and camera) or a ``viser.ClientHandle`` (one tab's own view; ``sorofem
+        view`` gives each tab one, see :func:`sorofem.viewer.serving.per_client`). Nothing is
+        started or blocked here.
     alpha_range
         ``(min, max)`` of the cable sliders, widened to include each cable's actuation.
+    body
+        The body to solve and move with the sliders (default: ``scene.body``, modified in
+        place); pass ``scene.body.replace()`` to leave the scene's alone.
+    equilibrium
+        Its equilibrium, if already solved (default: solved here).
 
     Returns
     -------
@@ -317,26 +590,32 @@ def build_view(scene: Scene, server: Any, *, alpha_range: tuple[float, float] = 
     ConvergenceError
         The scene's own static solve does not converge.
     """
-    body = scene.body
-    result = scene.solve()
+    body = scene.body if body is None else body
+    if equilibrium is None:
+        with CORE_LOCK:
+            equilibrium = scene.solve(body=body)
+    result = equilibrium
     faces = body.mesh.boundary_faces()
     nodes = np.unique(faces)
     remap = np.full(body.mesh.n_nodes, -1, dtype=np.int64)
     remap[nodes] = np.arange(nodes.size)
     view = View(server=server, scene=scene, body=body, result=result, surface_faces=remap[faces], surface_nodes=nodes,
-                solves=1)
+                solves=1, surface_edges=surface_edges(remap[faces]))
+    initial_colour = scene.output.get("color_by", "displacement") if hasattr(scene, "output") else "displacement"
+    view.colour_by = initial_colour if (initial_colour != "pressure" or result.pressure is not None) else "displacement"
 
     lo, hi = body.mesh.bounds
     size = float(np.linalg.norm(hi - lo))
     server.scene.set_up_direction("+z")
-    view.surface = server.scene.add_glb("/body/deformed", glb_data=view._surface_glb())
-    view.wireframe = server.scene.add_mesh_simple(
-        "/body/deformed_wireframe", view.surface_vertices.astype(np.float32), view.surface_faces,
-        color=(60, 60, 60), wireframe=True, visible=False,
+    colours = view.surface_colours()
+    view.surface = server.scene.add_glb("/body/deformed",
+                                        glb_data=surface_glb(view.surface_vertices, view.surface_faces, colours))
+    view.wireframe = server.scene.add_line_segments(
+        "/body/deformed_wireframe", view.surface_vertices[view.surface_edges].astype(np.float32),
+        colours[:, :3][view.surface_edges], thickness=WIREFRAME_THICKNESS, thickness_units="screen", visible=False,
     )
     centre = 0.5 * (lo + hi)
-    server.initial_camera.look_at = tuple(centre)
-    server.initial_camera.position = tuple(centre + size * np.array([0.35, -1.1, 0.55]))
+    place_camera(server, centre, centre + size * np.array([0.35, -1.1, 0.55]))
     rest = server.scene.add_mesh_simple(
         "/body/rest", body.mesh.points[nodes].astype(np.float32), view.surface_faces,
         color=REST_COLOUR, wireframe=True, visible=False,
@@ -353,10 +632,17 @@ def build_view(scene: Scene, server: Any, *, alpha_range: tuple[float, float] = 
             thickness=3.0, thickness_units="screen",
         ))
     view._static_nodes += view.cables
+    mu = body.material.per_element(body.mesh.n_tets)[0]
+    view.drag_stiffness = DRAG_STIFFNESS_PER_MU * float(np.mean(mu)) * size
+    view.drag_line = server.scene.add_line_segments("/drag", np.zeros((1, 2, 3), dtype=np.float32), DRAG_COLOUR,
+                                                    thickness=3.0, thickness_units="screen", visible=False)
+    view.surface.on_drag("left", modifier="shift")(view._on_drag)
+    view._static_nodes.append(view.drag_line)
 
     gui = server.gui
     header = gui.add_markdown(f"**{scene.path.name}**: {body.mesh.n_nodes} nodes, {body.mesh.n_tets} tets, "
-                              f"{len(body.cables)} cable(s)")
+                              f"{len(body.cables)} cable(s)  \nshift + drag on the body: pull a node with a "
+                              f"spring of {view.drag_stiffness:.3g} N/m")
     view.formulation = gui.add_dropdown("formulation", list(FORMULATIONS), initial_value=body.formulation)
     view.formulation.on_update(lambda event: view.set_formulation(event.target.value))
     for c, alpha in enumerate(body.actuations):
@@ -366,13 +652,11 @@ def build_view(scene: Scene, server: Any, *, alpha_range: tuple[float, float] = 
         )
         slider.on_update(lambda event, c=c: view.set_actuation(c, float(event.target.value)))
         view.sliders.append(slider)
-    initial_colour = scene.output.get("color_by", "displacement") if hasattr(scene, "output") else "displacement"
-    view.colour_by = initial_colour if (initial_colour != "pressure" or result.pressure is not None) else "displacement"
-    view._show(result, count=False)
     view.colour_dropdown = gui.add_dropdown("colour by", list(COLOR_FIELDS), initial_value=view.colour_by,
                                             hint="pressure: mixed formulation only")
     view.colour_dropdown.on_update(lambda event: view.set_colour(str(event.target.value)))
-    see_through = gui.add_checkbox("wireframe (see the cables)", initial_value=False)
+    view.colour_bar = gui.add_html("")
+    see_through = view.wireframe_checkbox = gui.add_checkbox("wireframe (see the cables)", initial_value=False)
     show_rest = gui.add_checkbox("show rest shape", initial_value=False)
 
     def _toggle(_: Any) -> None:
@@ -392,7 +676,12 @@ def build_view(scene: Scene, server: Any, *, alpha_range: tuple[float, float] = 
                 f"Euler) from {start}, with the formulation and cable actuations set here, and play the motion")
     view.simulate_button = gui.add_button(SIMULATE_LABEL, icon="movie", disabled=dynamics is None, hint=hint)
     view.simulate_button.on_click(lambda _: view.simulate())
-    view.status = gui.add_markdown(view._summary())
-    view._static_controls += [header, view.formulation, *view.sliders, view.colour_dropdown, see_through, show_rest,
-                              view.simulate_button, view.status]
+    view.progress_bar = gui.add_progress_bar(0.0, visible=False)
+    view.cancel_button = gui.add_button("cancel", icon="player-stop", visible=False,
+                                        hint="stop the simulation; the static view stays")
+    view.cancel_button.on_click(lambda _: view.cancel())
+    view.status = gui.add_markdown("")
+    view._show(result, count=False)
+    view._static_controls += [header, view.formulation, *view.sliders, view.colour_dropdown, view.colour_bar,
+                              see_through, show_rest, view.simulate_button, view.status]
     return view

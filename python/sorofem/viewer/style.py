@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-__all__ = ["ALPHA_RANGE", "ALPHA_STEP", "CABLE_COLOUR", "FIXED_COLOUR", "REST_COLOUR", "SURFACE_COLOUR", "SPEEDS",
-           "PLAYBACK_FPS", "SIMULATE_LABEL"]
+__all__ = ["ALPHA_RANGE", "ALPHA_STEP", "CABLE_COLOUR", "FIXED_COLOUR", "REST_COLOUR", "WIREFRAME_THICKNESS",
+           "SPEEDS", "PLAYBACK_FPS", "SIMULATE_LABEL", "DRAG_COLOUR", "DRAG_STIFFNESS_PER_MU", "DRAG_ITERATIONS",
+           "DRAG_TOLERANCE"]
 
 #: Actuation range of the cable sliders (widened to include a scene's own actuation).
 ALPHA_RANGE = (0.3, 1.2)
@@ -11,10 +12,18 @@ ALPHA_STEP = 0.005
 CABLE_COLOUR = (220, 40, 40)
 FIXED_COLOUR = (40, 90, 230)
 REST_COLOUR = (180, 180, 180)
-SURFACE_COLOUR = (120, 170, 215)
+#: Line width of the coloured wireframes, pixels.
+WIREFRAME_THICKNESS = 1.5
 #: Playback speeds offered, in multiples of real time.
 SPEEDS = (0.01, 0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0, 100.0)
 #: Most frames per second the playback sends to the browser (denser frames are skipped).
 PLAYBACK_FPS = 30.0
 #: Label of the scene view's button that simulates the scene's [dynamics] and plays the motion.
 SIMULATE_LABEL = "simulate [dynamics]"
+#: The spring of a pulled node (shift + drag): its colour, its stiffness as a multiple of the
+#: mean shear modulus times the body's size (N/m; 0.1 is firm without pinning the node), and its
+#: force iteration's limit and relative tolerance.
+DRAG_COLOUR = (240, 150, 20)
+DRAG_STIFFNESS_PER_MU = 0.1
+DRAG_ITERATIONS = 12
+DRAG_TOLERANCE = 1e-6
