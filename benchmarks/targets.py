@@ -105,6 +105,14 @@ def targets(rows: dict[str, Row], array_dir: Path) -> str:
         lines.append(f"| 1 s of hammerbot dynamics: no Newton failure | sorofem/hammerbot-dynamics-1s | "
                      f"{'failed' if failed else 'none'} ({fmt(r.get('cutbacks'))} cutbacks, "
                      f"{fmt(r.get('iterations'))} Newton it.) | no failure | {'**NO**' if failed else 'yes'} |")
+        add("1 s of hammerbot dynamics, default method: time (issue 18)", "sorofem/hammerbot-dynamics-1s",
+            good and good["seconds"], 1.0, " s")
+        add("1 s of hammerbot dynamics, default method: tip deviation from a tight run (issue 18)",
+            "sorofem/hammerbot-dynamics-1s", good and good["max_tip_deviation_percent"], 0.5, " %")
+    newton = ok_row("sorofem/hammerbot-dynamics-1s-newton")
+    if r is not None and newton:
+        add("1 s of hammerbot dynamics: default method time / newton (same run)", "sorofem/hammerbot-dynamics-1s",
+            good and ratio(good["seconds"], newton["seconds"]), 1.0, "x")
 
     # Adjoint.
     r = rows.get("sorofem/hammerbot-adjoint")

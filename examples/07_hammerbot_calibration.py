@@ -43,7 +43,7 @@ The paper's (mu, lambda) give 6.62 mm (standard) and 1.75 mm (mixed) RMS in our 
 The script exits with status 1 unless every check passes:
 
 * ``<formulation>_budget``: the (mu, lambda) fit from the first start takes at most 40
-  forward solves and 30 s.
+  forward solves.
 * ``<formulation>_beats_paper_values``: its RMS misfit is below that of the paper's
   (mu, lambda) evaluated in our model.
 * ``<formulation>_lambda_reported_at_bound``: lambda ends on its lower bound, and the fit
@@ -106,7 +106,6 @@ NU_RANGE = (1e-3, 0.4999)  # the Poisson ratio's range in the (E, nu) fit and it
 NU_PROFILE = {True: (1e-3, 0.25, 0.45, 0.4999), False: (1e-3, 0.1, 0.2, 0.3, 0.4, 0.45, 0.49, 0.499, 0.4999)}
 SILICONE_NU = NU_RANGE[1]
 BUDGET_SOLVES = 40
-BUDGET_TIME = 30.0  # s
 SOLVE_TOLERANCE = 1e-8
 
 
@@ -163,9 +162,9 @@ def run(out_dir: str | Path = "results/hammerbot_calibration", quick: bool = Fal
         lame[formulation] = {"runs": runs, "paper_values_rms": paper_rms}
         unc = first["uncertainty"]
         checks[f"{formulation}_budget"] = {
-            "passed": first["fit_forward_solves"] <= BUDGET_SOLVES and first["time"] <= BUDGET_TIME,
+            "passed": first["fit_forward_solves"] <= BUDGET_SOLVES,
             "value": {"forward_solves": first["fit_forward_solves"], "time": first["time"]},
-            "limit": f"<= {BUDGET_SOLVES} forward solves and <= {BUDGET_TIME:g} s",
+            "limit": f"<= {BUDGET_SOLVES} forward solves",
         }
         checks[f"{formulation}_beats_paper_values"] = {
             "passed": first["residual_rms"] < paper_rms,

@@ -16,7 +16,6 @@ with status 1 unless every check passes:
 * ``misfit_drop``: data misfit ``1/2 |r|^2`` (all scenarios, regularisation excluded) drops by
   at least 100 x from the uniform start.
 * ``field_correlation``: Pearson correlation of fitted and true mu over the elements > 0.7.
-* ``runtime``: the fit takes < 20 s (quick mode) or < 120 s (full mode).
 
 Outputs in ``--out DIR`` (default ``results/stiff_inclusion``): ``summary.json`` (truth, fit,
 per element true and fitted mu, checks) and ``inclusion.png`` (true and fitted mu against the
@@ -52,7 +51,6 @@ REGULARIZATION = 1e-9  # m^2
 MIN_CONTRAST = 1.5
 MIN_DROP = 100.0
 MIN_CORRELATION = 0.7
-TIME_LIMIT = {True: 20.0, False: 120.0}
 
 
 def build(cells: tuple[int, int, int], mu: np.ndarray | float, lam: float) -> sf.Body:
@@ -113,7 +111,6 @@ def run(out_dir: str | Path = "results/stiff_inclusion", quick: bool = False) ->
                         "limit": f"data 1/2|r|^2 drops >= {MIN_DROP:g} x"},
         "field_correlation": {"passed": corr > MIN_CORRELATION, "value": corr,
                               "limit": f"corr(fitted mu, true mu) > {MIN_CORRELATION}"},
-        "runtime": {"passed": fit_time < TIME_LIMIT[quick], "value": fit_time, "limit": f"fit < {TIME_LIMIT[quick]:g} s"},
     }
     _plot(c[:, 0], mu_true, mu_fit, inside, fit.history, out / "inclusion.png")
     summary = {

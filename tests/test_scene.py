@@ -23,7 +23,7 @@ def test_valid_box_scene(box_scene):
     assert scene.formulation == "standard"
     assert scene.gravity.tolist() == [0, 0, -9.81]
     assert scene.body.fixed_nodes.size == 4
-    assert scene.solver == {"tolerance": 1e-8, "max_iterations": 50, "load_steps": 1}
+    assert scene.solver == {"tolerance": 1e-8, "max_iterations": 50, "load_steps": 1, "max_cutbacks": 8}
     assert scene.material.density == 1080
     result = scene.solve()
     assert result.report.converged
@@ -409,3 +409,44 @@ def test_mesh_transformed_checks_its_axes():
         mesh.transformed(["x", "y"])
     assert info.value.parameter == "axes"
     assert mesh.transformed(("+x", "y", "z")).points.tolist() == mesh.points.tolist()
+
+
+def soft_beam_scene(max_cutbacks: object) -> str:
+    """A slender soft beam under its weight: too far from the rest shape for 8 Newton iterations
+    in one load step; 7 halvings of the step are needed."""
+    return f"""\
+[mesh]
+box = {{ size = [0.4, 0.05, 0.05], cells = [16, 2, 2] }}
+
+[material]
+youngs_modulus = 1e4
+poisson_ratio = 0.3
+density = 1000
+
+[[fixed]]
+box = {{ min = [-1e-9, -1, -1], max = [1e-9, 1, 1] }}
+
+[loads]
+gravity = [0, 0, -9.81]
+
+[solver]
+max_iterations = 8
+max_cutbacks = {max_cutbacks}
+"""
+
+
+def test_solver_max_cutbacks_limits_the_halvings_of_a_load_step(tmp_path):
+    solved = sf.Scene.load(write(tmp_path, soft_beam_scene(8))).solve()
+    assert solved.report.converged and solved.report.cutbacks == 7
+    for limit in (0, 6):
+        scene = sf.Scene.load(write(tmp_path, soft_beam_scene(limit)))
+        assert scene.solve_options.max_cutbacks == limit
+        with pytest.raises(sf.errors.ConvergenceError, match=f"after {limit} cut-backs"):
+            scene.solve()
+
+
+def test_solver_max_cutbacks_must_be_a_non_negative_integer(tmp_path):
+    for bad in ("-1", "1.5", "true"):
+        path = write(tmp_path, soft_beam_scene(bad))
+        with pytest.raises(sf.errors.SceneError, match="max_cutbacks"):
+            sf.Scene.load(path)

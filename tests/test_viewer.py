@@ -85,7 +85,7 @@ def test_slider_resolves_warm_started_and_moves_the_surface(server) -> None:
 
     # Same as a direct warm-started solve at that actuation.
     body = rebuild_body(view.body, "standard")
-    reference = sf.solve_static(body, scene.gravity, **scene.solver)
+    reference = sf.solve_static(body, scene.gravity, options=scene.solve_options)
     np.testing.assert_allclose(view.result.positions, reference.positions, atol=1e-7)
 
 
@@ -191,7 +191,7 @@ def test_mixed_slider_moves_by_continuation(server) -> None:
     view.sliders[0].value = 0.7
     assert view.move_steps >= 8 and view.result.actuations == [pytest.approx(0.7)]
     assert f"{view.move_iterations} Newton iterations" in view.status.content
-    reference = sf.solve_static(rebuild_body(view.body, "mixed"), scene.gravity, **scene.solver)
+    reference = sf.solve_static(rebuild_body(view.body, "mixed"), scene.gravity, options=scene.solve_options)
     np.testing.assert_allclose(view.result.positions, reference.positions, atol=1e-7)
 
     # One jump from the same state, on a body of its own (the compiled model keeps the last
@@ -201,7 +201,7 @@ def test_mixed_slider_moves_by_continuation(server) -> None:
     start = sf.actuate(body, 0, 0.3, scene.gravity, tolerance=scene.solve_options.tolerance,
                        max_iterations=scene.solve_options.max_iterations)[-1]
     body.set_actuation(0, 0.7)
-    jump = sf.solve_static(body, scene.gravity, initial=start, **scene.solver).report.iterations
+    jump = sf.solve_static(body, scene.gravity, initial=start, options=scene.solve_options).report.iterations
     assert view.move_iterations < jump
 
 
@@ -236,7 +236,7 @@ def test_a_node_pulled_with_a_spring(server) -> None:
     assert x[2] > before[tip][2] + 0.02 and np.linalg.norm(view.drag_force) > 1.0  # lifted, by a real force
     assert f"pulling node {tip}" in view.status.content and view.drag_line.visible
     # The equilibrium of the body with that force, solved independently.
-    reference = sf.solve_static(rebuild_body(view.body, "standard"), scene.gravity, **scene.solver)
+    reference = sf.solve_static(rebuild_body(view.body, "standard"), scene.gravity, options=scene.solve_options)
     np.testing.assert_allclose(view.result.positions, reference.positions, atol=1e-7)
     view.release()
     assert view.dragged is None and not view.drag_line.visible
@@ -607,7 +607,7 @@ def test_each_tab_has_its_own_view(server, tmp_path) -> None:
             for tab, alpha in ((first, 0.5), (second, 0.6)):
                 assert tab.result.actuations == [pytest.approx(alpha)] and tab.result.report.converged
                 body = rebuild_body(tab.body, tab.body.formulation)
-                reference = sf.solve_static(body, scene.gravity, **scene.solver)
+                reference = sf.solve_static(body, scene.gravity, options=scene.solve_options)
                 np.testing.assert_allclose(tab.result.positions, reference.positions, atol=1e-7)
             # A tab's simulation plays in that tab only.
             motion = first.simulate(play=False)

@@ -64,7 +64,10 @@ class _Trajectory(TypedDict):
     cable_points: list[list[_F]]  # per frame, per cable (k, 3)
     kinetic_energy: _F  # (frames,), J
     iterations: list[int]  # Newton iterations per step
+    factorizations: list[int]  # numeric factorisations per step
+    residuals: list[float]  # relative residual each step ended with
     cutbacks: int
+    timings: dict[str, float]  # seconds per phase, all steps
 
 class _ParamGradient(TypedDict, total=False):
     material: dict[str, _F]  # per material parameter name (Model.material_param_names), (m,)
@@ -289,8 +292,10 @@ class Model:
         save_every: int = 1,
         *,
         options: SolveOptions | None = None,
+        method: str = "modified",
     ) -> _Trajectory:
         """Implicit Euler with lumped mass and Rayleigh damping (alpha_M 1/s, beta_K s);
         actuation (steps, n_cables) alphas per step; Newton settings per step as for solve
-        (load_steps and max_cutbacks do not apply). Raises ConvergenceError when a step fails
-        even after halving it six times."""
+        (load_steps and max_cutbacks do not apply); method "modified", "newton" or
+        "linearly_implicit". Raises ConvergenceError when a step fails even after halving it
+        six times."""

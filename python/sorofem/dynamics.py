@@ -6,7 +6,8 @@ Each time step of length ``dt`` minimises the incremental potential
 
 over the displacements ``u`` (``M``: lumped mass, ``rho V / 4`` per tet and node;
 ``D = alpha_M M + beta_K K``: Rayleigh damping; ``Pi``: elastic, cable and load potential),
-then sets ``v = (u - u_n) / dt``. Implicit Euler is unconditionally stable and dissipates
+then sets ``v = (u - u_n) / dt``. The stiffness-proportional part damps the rate of the internal
+force, ``beta_K (F(u) - F(u_n)) / dt``, which is ``beta_K K v`` for small steps. Implicit Euler is unconditionally stable and dissipates
 energy (it is first-order accurate), which is what a quasi-static soft robot needs; use a small
 ``dt`` to follow oscillations accurately. A step whose Newton solve fails is split in halves
 (counted in :attr:`Trajectory.cutbacks`).
@@ -204,6 +205,11 @@ class Trajectory:
         ``1/2 v^T M v`` of each frame, ``(frames,)``, J.
     iterations
         Newton iterations of each time step, ``(steps,)`` (sub-steps of a cut-back step added).
+    factorizations
+        Numeric factorisations of each time step's Hessian, ``(steps,)`` (the same way).
+    residuals
+        The relative residual each time step ended with, ``(steps,)``: below ``tolerance``
+        unless ``method="linearly_implicit"``.
     cutbacks
         How many time steps were split because Newton failed.
     cable_points
@@ -223,6 +229,8 @@ class Trajectory:
         self.velocities = np.asarray(out["velocities"], dtype=np.float64)
         self.kinetic_energy = np.asarray(out["kinetic_energy"], dtype=np.float64)
         self.iterations = np.asarray(out["iterations"], dtype=np.int64)
+        self.factorizations = np.asarray(out["factorizations"], dtype=np.int64)
+        self.residuals = np.asarray(out["residuals"], dtype=np.float64)
         self.cutbacks = int(out.get("cutbacks", 0))
         self.cable_points = [[np.asarray(p, dtype=np.float64) for p in frame] for frame in out.get("cable_points", [])]
         self.actuation = actuation
@@ -330,6 +338,10 @@ class Trajectory:
         )
 
 
+#: The step methods of :func:`simulate`, accurate (converged steps) ones first.
+STEP_METHODS = ("modified", "newton", "linearly_implicit")
+
+
 def simulate(
     body: Body,
     dt: float,
@@ -344,6 +356,7 @@ def simulate(
     tolerance: float = 1e-8,
     max_iterations: int = 50,
     progress: bool | None = None,
+    method: str = "modified",
 ) -> Trajectory:
     """Integrate the body's motion in time with implicit Euler (see the module docstring).
 
@@ -372,6 +385,15 @@ def simulate(
         Save every this many steps (the initial and the last state are always saved).
     tolerance, max_iterations
         Newton's relative residual tolerance and iteration limit per step.
+    method
+        How each step's minimisation is solved (see :data:`STEP_METHODS`): ``"modified"``
+        (default) keeps the Hessian's factorisation across iterations and steps and
+        refactorises where the residual falls by less than a quarter in an iteration;
+        ``"newton"`` refactorises at every iteration. Both converge every step to
+        ``tolerance``, so their trajectories agree to it. ``"linearly_implicit"`` takes one
+        iteration per step (SOFA's linearised implicit Euler): fast, less accurate and more
+        dissipative; each step's remaining residual is in :attr:`Trajectory.residuals`
+        (BENCHMARKS.md gives the accuracy on the hammerbot).
     progress
         A progress line on stderr (steps done, simulated time, Newton iterations per step,
         cutbacks, elapsed time, ETA): ``None`` (default) only when stderr is a terminal and the
@@ -405,6 +427,8 @@ def simulate(
     save_every = positive_int(save_every, "save_every")
     tol = positive_scalar(tolerance, "tolerance")
     iters = positive_int(max_iterations, "max_iterations")
+    if method not in STEP_METHODS:
+        raise ParameterError(f"method: expected one of {', '.join(map(repr, STEP_METHODS))}, got {method!r}", "method")
     g = as_finite(gravity, "gravity", (3,))
     if not isinstance(damping, (tuple, list)) or len(damping) != 2:
         raise ParameterError(f"damping: expected (alpha_M, beta_K), got {describe(damping)}", "damping")
@@ -437,7 +461,7 @@ def simulate(
     def run(n: int, a: NDArray[np.float64], x: Any, v: Any, every: int) -> dict[str, Any]:
         return model.simulate(
             g, forces.copy(), prescribed.copy(), dt, n, a,
-            mass_damping, stiffness_damping, x, v, tol, iters, every,
+            mass_damping, stiffness_damping, x, v, tol, iters, every, method=method,
         )
 
     bar = Progress(total=steps, desc="simulate", unit="steps", enabled=progress)
@@ -500,7 +524,8 @@ def _run_in_chunks(
     only its end, kept if that is a save point. The first chunk is one step; later ones aim at
     :data:`CHUNK_SECONDS` each."""
     joined: dict[str, Any] = {"times": [], "positions": [], "kinetic_energy": [], "cable_points": [],
-                              "iterations": [], "cutbacks": 0, "velocities": None}
+                              "iterations": [], "factorizations": [], "residuals": [], "cutbacks": 0,
+                              "velocities": None}
     done, t_offset, size = 0, 0.0, 1
     x, v = x0, v0
     while done < steps:
@@ -530,6 +555,8 @@ def _run_in_chunks(
         joined["kinetic_energy"].append(np.asarray(out["kinetic_energy"], dtype=np.float64)[keep])
         joined["cable_points"].extend(list(out.get("cable_points", []))[keep])
         joined["iterations"].append(np.asarray(out["iterations"], dtype=np.int64))
+        joined["factorizations"].append(np.asarray(out["factorizations"], dtype=np.int64))
+        joined["residuals"].append(np.asarray(out["residuals"], dtype=np.float64))
         joined["cutbacks"] += int(out.get("cutbacks", 0))
         joined["velocities"] = out["velocities"]
         x, v = positions[-1], np.asarray(out["velocities"], dtype=np.float64)
@@ -545,6 +572,8 @@ def _run_in_chunks(
         "kinetic_energy": np.concatenate(joined["kinetic_energy"]),
         "cable_points": joined["cable_points"],
         "iterations": np.concatenate(joined["iterations"]),
+        "factorizations": np.concatenate(joined["factorizations"]),
+        "residuals": np.concatenate(joined["residuals"]),
         "cutbacks": joined["cutbacks"],
     }
 

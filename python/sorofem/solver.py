@@ -17,12 +17,15 @@ Examples
 from __future__ import annotations
 
 import math
+import numbers
 import warnings
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any
 
+from ._extension import core
 from ._text import plural
-from ._validate import Range, positive_int, positive_scalar
+from ._validate import Range, describe
+from .errors import ParameterError
 
 __all__ = ["SolveOptions", "SolveReport", "MERITS"]
 
@@ -48,6 +51,8 @@ class SolveOptions:
         Newton iterations allowed per load step, >= 1.
     load_steps
         Equal load increments, >= 1 (the solver may cut a step back).
+    max_cutbacks
+        How many times a failed load step may be halved before the solve gives up, >= 0.
 
     Raises
     ------
@@ -62,19 +67,35 @@ class SolveOptions:
     load_steps: int = _option(
         1, "equal load increments (the solver may cut a step back)", Range(ge=1), integer=True
     )
+    max_cutbacks: int = _option(
+        8, "times a failed load step may be halved before the solve gives up", Range(ge=0), integer=True
+    )
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            check = positive_int if f.metadata["integer"] else positive_scalar
-            object.__setattr__(self, f.name, check(getattr(self, f.name), f.name))
+            value = getattr(self, f.name)
+            if f.metadata["integer"]:
+                if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+                    raise ParameterError(f"{f.name}: expected an integer, got {describe(value)}", f.name)
+                value = int(value)
+            else:
+                if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
+                    raise ParameterError(f"{f.name}: expected a finite number, got {describe(value)}", f.name)
+                value = float(value)
+            f.metadata["range"].check(value, f.name)
+            object.__setattr__(self, f.name, value)
+
+    def to_core(self) -> Any:
+        """The same options as the core's ``sorofem._core.SolveOptions`` (what a solve passes)."""
+        return core().SolveOptions(**asdict(self))
 
     def replace(self, **changes: Any) -> "SolveOptions":
         """A copy with some options changed (checked again)."""
         return replace(self, **changes)
 
     def to_dict(self) -> dict[str, Any]:
-        """``{"tolerance": ..., "max_iterations": ..., "load_steps": ...}``: keyword arguments of
-        :func:`sorofem.solve_static`."""
+        """``{"tolerance": ..., "max_iterations": ..., "load_steps": ..., "max_cutbacks": ...}``:
+        the scene's ``[solver]`` table."""
         return asdict(self)
 
 

@@ -318,8 +318,7 @@ def solve_static(
     # The core solves in one call (the GIL released): the line can only show the elapsed time.
     with Progress(total=1, desc="static solve", unit="solve", enabled=progress) as bar:
         try:
-            out = model.solve(g, body.forces, body.prescribed_displacement, x0, options.tolerance,
-                              options.max_iterations, options.load_steps)
+            out = model.solve(g, body.forces, body.prescribed_displacement, x0, options=options.to_core())
         except ConvergenceError as err:
             if isinstance(err.report, dict):
                 err.report = SolveReport.from_dict(err.report, body.formulation)

@@ -32,7 +32,7 @@ pub mod tolerance;
 pub use error::{Error, Result};
 pub use mesh::{Orientation, TetMesh};
 pub use model::{
-    Damping, DofLayout, Formulation, Loads, Material, Model, PressureMass, Solution, SolveOptions,
-    TermSpecs, Trajectory,
+    Damping, DofLayout, DynamicsOptions, Formulation, Loads, Material, Model, PressureMass,
+    Solution, SolveOptions, StepMethod, TermSpecs, Trajectory,
 };
 pub use report::{SolveReport, Timings};

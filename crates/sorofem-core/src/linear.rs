@@ -122,6 +122,9 @@ pub struct SparseFactor {
     /// Supernodal factors with two subtrees of similar size: how the triangular solves share
     /// the work between two threads.
     split: Option<SolveSplit>,
+    /// Numeric factorisations so far: tells a caller that kept this factor as an approximation
+    /// whether it still holds the values it factored.
+    generation: u64,
 }
 
 impl SparseFactor {
@@ -216,6 +219,7 @@ impl SparseFactor {
             values: written_zeros(symbolic.len_val()),
             symbolic,
             stored: Stored::None,
+            generation: 0,
             scratch: None,
             order: order.to_vec(),
             permuted_values: written_zeros(permuted.nnz()),
@@ -270,10 +274,22 @@ impl SparseFactor {
         self.kind
     }
 
+    /// How many numeric factorisations (successful or not) this factor has run: unchanged
+    /// means it still holds the one a caller saw at that count.
+    pub fn generation(&self) -> u64 {
+        self.generation
+    }
+
+    /// Whether a numeric factorisation is stored (the last one succeeded).
+    pub fn is_factored(&self) -> bool {
+        self.stored != Stored::None
+    }
+
     /// Numeric factorisation of the [`FactorKind`] chosen at analysis, of `values` in the
     /// analysed `pattern`. `Ok(false)` when the matrix has no such factorisation: not
     /// numerically positive definite (`L L^T`), a zero or non-finite pivot (`L D L^T`).
     pub fn factor(&mut self, pattern: &LowerPattern, values: &[f64]) -> Result<bool> {
+        self.generation += 1;
         match self.kind {
             FactorKind::Llt => self.factor_llt(pattern, values),
             FactorKind::Ldlt => self.factor_ldlt(pattern, values),

@@ -140,6 +140,12 @@ pub trait NewtonProblem {
     fn auxiliary(&mut self) -> Option<&mut dyn AuxiliaryIterates> {
         None
     }
+    /// Whether [`NewtonProblem::direction`] may solve with a factorisation kept from earlier
+    /// iterates (modified Newton): a Hessian assembled beside a line-search trial would then
+    /// often go unused, so none is.
+    fn reuses_factorizations(&self) -> bool {
+        false
+    }
 }
 
 /// Iterates a problem carries besides `z` (the element pressures of
@@ -209,6 +215,42 @@ pub fn solve(
     report.converged = true;
     report.timings.total = start.elapsed().as_secs_f64();
     report.message = format!("converged in {} Newton iterations", report.iterations);
+    Ok(report)
+}
+
+/// One Newton iteration at load factor 1 from `z` (a linearly implicit step): the direction,
+/// then the line search along it, whatever the residual is afterwards (`report.converged`
+/// says whether it is within the tolerance; `report.residual_history` has both residuals).
+/// `Err(NotConverged)` when no direction or no step along it is found.
+pub fn single_iteration(
+    problem: &mut dyn NewtonProblem,
+    z: &mut [f64],
+    options: &NewtonOptions,
+) -> Result<SolveReport> {
+    let start = Instant::now();
+    let mut report = SolveReport::default();
+    options.validate()?;
+    problem.set_load_factor(1.0, z);
+    let once = NewtonOptions {
+        max_iterations: 1,
+        ..options.clone()
+    };
+    let converged = newton_step(problem, z, &once, &mut report)?;
+    report.timings.total = start.elapsed().as_secs_f64();
+    if !converged && report.step_lengths.is_empty() {
+        let message = format!(
+            "the linearly implicit step found no decrease along its direction (relative residual {:.3e})",
+            report.residual_history.last().copied().unwrap_or(f64::NAN)
+        );
+        report.message = message.clone();
+        return Err(Error::NotConverged {
+            message,
+            report: Box::new(report),
+        });
+    }
+    report.converged = converged;
+    report.load_steps = 1;
+    report.message = "one linearised step".into();
     Ok(report)
 }
 
@@ -298,7 +340,7 @@ fn newton_step(
         }
         let mut accepted = false;
         let mut trial = z.to_vec();
-        let prepare = prepare_next && !projected;
+        let prepare = prepare_next && !projected && !problem.reuses_factorizations();
         for _ in 0..40 {
             trial.copy_from_slice(z);
             problem.step(&mut trial, &d, t);

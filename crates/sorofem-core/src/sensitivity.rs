@@ -43,17 +43,17 @@ impl ParamVector {
 }
 
 /// Where each parameter block sits in one flat vector, and where each term's blocks are.
-struct ParamLayout {
+pub(crate) struct ParamLayout {
     /// Name, offset and length of every block, in order of first appearance.
-    blocks: Vec<(String, usize, usize)>,
+    pub(crate) blocks: Vec<(String, usize, usize)>,
     /// Per term, the flat offset of each of its blocks.
-    term_offsets: Vec<Vec<usize>>,
-    len: usize,
+    pub(crate) term_offsets: Vec<Vec<usize>>,
+    pub(crate) len: usize,
 }
 
 impl ParamLayout {
     /// Blocks of the same name in several terms are one parameter (and must agree in length).
-    fn new(terms: &[&dyn ParamTerm]) -> Self {
+    pub(crate) fn new(terms: &[&dyn ParamTerm]) -> Self {
         let mut layout = ParamLayout {
             blocks: Vec::new(),
             term_offsets: Vec::new(),
@@ -80,7 +80,7 @@ impl ParamLayout {
         layout
     }
 
-    fn unflatten(&self, flat: &[f64]) -> ParamVector {
+    pub(crate) fn unflatten(&self, flat: &[f64]) -> ParamVector {
         ParamVector {
             blocks: self
                 .blocks
@@ -91,7 +91,7 @@ impl ParamLayout {
     }
 
     /// The flat vector of `p`, whose blocks must be among this layout's (missing ones are zero).
-    fn flatten(&self, p: &ParamVector) -> Result<Vec<f64>> {
+    pub(crate) fn flatten(&self, p: &ParamVector) -> Result<Vec<f64>> {
         let mut flat = vec![0.0; self.len];
         for (name, values) in &p.blocks {
             let Some(&(_, offset, len)) = self.blocks.iter().find(|b| &b.0 == name) else {
@@ -172,6 +172,77 @@ impl ElementScratch {
     }
 }
 
+/// Adds `w . d(grad_term)/dtheta` at the full DOF vector `z` to `flat` (the parameters laid out
+/// by a [`ParamLayout`], `offsets` this term's block offsets there). The element kernels run in
+/// parallel (large terms); their values are summed in element order.
+pub(crate) fn add_contraction(
+    term: &dyn ParamTerm,
+    offsets: &[usize],
+    z: &[f64],
+    w: &[f64],
+    flat: &mut [f64],
+) {
+    let (s, k) = (term.stencil_size(), term.element_param_count());
+    if k == 0 || term.n_elements() == 0 {
+        return;
+    }
+    let mut contributions = vec![(0usize, 0.0f64); term.n_elements() * k];
+    for_each_element(term, &mut contributions, k, |scratch, (e, out)| {
+        scratch.gather(term, e, z);
+        term.element_param_gradient(e, &scratch.local, &mut scratch.gradient);
+        for (j, slot) in out.iter_mut().enumerate() {
+            let (block, index) = scratch.params[j];
+            let row = &scratch.gradient[j * s..(j + 1) * s];
+            let value = row.iter().zip(&scratch.dofs).map(|(g, &d)| g * w[d]).sum();
+            *slot = (offsets[block] + index, value);
+        }
+    });
+    for (index, value) in contributions {
+        flat[index] += value;
+    }
+}
+
+/// Adds `scale d(grad_term)/dtheta . delta` (full DOFs) at the full DOF vector `z` to `out`
+/// (`delta` laid out as in [`add_contraction`]). Elements whose parameters `delta` leaves
+/// unchanged are skipped.
+pub(crate) fn add_derivative_along(
+    term: &dyn ParamTerm,
+    offsets: &[usize],
+    z: &[f64],
+    delta: &[f64],
+    scale: f64,
+    out: &mut [f64],
+) {
+    let (s, k) = (term.stencil_size(), term.element_param_count());
+    if k == 0 || term.n_elements() == 0 {
+        return;
+    }
+    let mut local_out = vec![0.0; term.n_elements() * s];
+    for_each_element(term, &mut local_out, s, |scratch, (e, out)| {
+        scratch.gather(term, e, z);
+        for (weight, &(block, index)) in scratch.weights.iter_mut().zip(&scratch.params) {
+            *weight = delta[offsets[block] + index];
+        }
+        out.fill(0.0);
+        if scratch.weights.iter().all(|&v| v == 0.0) {
+            return;
+        }
+        term.element_param_gradient(e, &scratch.local, &mut scratch.gradient);
+        for (j, &weight) in scratch.weights.iter().enumerate() {
+            for (o, g) in out.iter_mut().zip(&scratch.gradient[j * s..(j + 1) * s]) {
+                *o += weight * g;
+            }
+        }
+    });
+    let mut dofs = vec![0; s];
+    for (e, values) in local_out.chunks(s).enumerate() {
+        term.element_dofs(e, &mut dofs);
+        for (&d, v) in dofs.iter().zip(values) {
+            out[d] += scale * v;
+        }
+    }
+}
+
 impl Model {
     /// The model's parameters, all zero: the material's parameters (per tet), `density` (per
     /// tet), `gravity` (3), `cable_actuation` and `cable_stiffness` (per cable).
@@ -220,24 +291,7 @@ impl Model {
         let layout = ParamLayout::new(&terms);
         let mut flat = vec![0.0; layout.len];
         for (term, offsets) in terms.iter().zip(&layout.term_offsets) {
-            let (s, k) = (term.stencil_size(), term.element_param_count());
-            if k == 0 || term.n_elements() == 0 {
-                continue;
-            }
-            let mut contributions = vec![(0usize, 0.0f64); term.n_elements() * k];
-            for_each_element(*term, &mut contributions, k, |scratch, (e, out)| {
-                scratch.gather(*term, e, z);
-                term.element_param_gradient(e, &scratch.local, &mut scratch.gradient);
-                for (j, slot) in out.iter_mut().enumerate() {
-                    let (block, index) = scratch.params[j];
-                    let row = &scratch.gradient[j * s..(j + 1) * s];
-                    let value = row.iter().zip(&scratch.dofs).map(|(g, &d)| g * w[d]).sum();
-                    *slot = (offsets[block] + index, value);
-                }
-            });
-            for (index, value) in contributions {
-                flat[index] += value;
-            }
+            add_contraction(*term, offsets, z, w, &mut flat);
         }
         layout.unflatten(&flat)
     }
@@ -252,34 +306,7 @@ impl Model {
         let delta = layout.flatten(delta)?;
         let mut out = vec![0.0; z.len()];
         for (term, offsets) in terms.iter().zip(&layout.term_offsets) {
-            let (s, k) = (term.stencil_size(), term.element_param_count());
-            if k == 0 || term.n_elements() == 0 {
-                continue;
-            }
-            let mut local_out = vec![0.0; term.n_elements() * s];
-            for_each_element(*term, &mut local_out, s, |scratch, (e, out)| {
-                scratch.gather(*term, e, z);
-                for (weight, &(block, index)) in scratch.weights.iter_mut().zip(&scratch.params) {
-                    *weight = delta[offsets[block] + index];
-                }
-                out.fill(0.0);
-                if scratch.weights.iter().all(|&v| v == 0.0) {
-                    return;
-                }
-                term.element_param_gradient(e, &scratch.local, &mut scratch.gradient);
-                for (j, &weight) in scratch.weights.iter().enumerate() {
-                    for (o, g) in out.iter_mut().zip(&scratch.gradient[j * s..(j + 1) * s]) {
-                        *o += weight * g;
-                    }
-                }
-            });
-            let mut dofs = vec![0; s];
-            for (e, values) in local_out.chunks(s).enumerate() {
-                term.element_dofs(e, &mut dofs);
-                for (&d, v) in dofs.iter().zip(values) {
-                    out[d] += v;
-                }
-            }
+            add_derivative_along(*term, offsets, z, &delta, 1.0, &mut out);
         }
         Ok(out)
     }

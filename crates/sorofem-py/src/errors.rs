@@ -4,7 +4,7 @@
 use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
 use pyo3::types::{PyDict, PyTuple, PyType};
-use sorofem_core::{Error, SolveReport};
+use sorofem_core::{Error, SolveReport, Timings};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
 /// Converts a core error into the matching `sorofem.errors` exception. A `ParameterError`
@@ -117,13 +117,18 @@ pub fn report_to_dict<'py>(py: Python<'py>, report: &SolveReport) -> PyResult<Bo
     d.set_item("residual_norm", report.residual_norm)?;
     d.set_item("reference_norm", report.reference_norm)?;
     d.set_item("message", report.message.clone())?;
-    let t = PyDict::new(py);
-    t.set_item("assembly", report.timings.assembly)?;
-    t.set_item("factorization", report.timings.factorization)?;
-    t.set_item("solve", report.timings.solve)?;
-    t.set_item("line_search", report.timings.line_search)?;
-    t.set_item("failed_factorization", report.timings.failed_factorization)?;
-    t.set_item("total", report.timings.total)?;
-    d.set_item("timings", t)?;
+    d.set_item("timings", timings_to_dict(py, &report.timings)?)?;
     Ok(d)
+}
+
+/// Seconds per phase (the counts are reported beside them).
+pub fn timings_to_dict<'py>(py: Python<'py>, timings: &Timings) -> PyResult<Bound<'py, PyDict>> {
+    let t = PyDict::new(py);
+    t.set_item("assembly", timings.assembly)?;
+    t.set_item("factorization", timings.factorization)?;
+    t.set_item("solve", timings.solve)?;
+    t.set_item("line_search", timings.line_search)?;
+    t.set_item("failed_factorization", timings.failed_factorization)?;
+    t.set_item("total", timings.total)?;
+    Ok(t)
 }

@@ -2,7 +2,7 @@
 //! the core goes through [`guarded`].
 
 use crate::convert;
-use crate::errors::{guarded, report_to_dict, to_py, IntoPyResult};
+use crate::errors::{guarded, report_to_dict, timings_to_dict, to_py, IntoPyResult};
 use crate::mesh::Mesh;
 use crate::options::SolveOptions;
 use numpy::{PyArray1, PyArrayMethods};
@@ -252,11 +252,12 @@ impl Model {
     }
 
     /// Implicit Euler dynamics; returns a dict with "times", "positions" (frames, n, 3),
-    /// "velocities" (n, 3), "cable_points", "kinetic_energy", "iterations", "cutbacks".
-    /// Newton settings per time step: `options` (its `load_steps` and `max_cutbacks` do not apply:
-    /// a failed step is halved, up to six times) or the keyword arguments `tolerance` and
-    /// `max_iterations`.
-    #[pyo3(signature = (gravity, forces, prescribed, dt, steps, actuation, mass_damping = 0.0, stiffness_damping = 0.0, initial_positions = None, initial_velocities = None, tolerance = None, max_iterations = None, save_every = 1, *, options = None))]
+    /// "velocities" (n, 3), "cable_points", "kinetic_energy", "iterations", "factorizations",
+    /// "residuals" (per step), "cutbacks" and "timings". Newton settings per time step:
+    /// `options` (its `load_steps` and `max_cutbacks` do not apply: a failed step is halved,
+    /// up to six times) or the keyword arguments `tolerance` and `max_iterations`; `method`
+    /// "newton", "modified" or "linearly_implicit".
+    #[pyo3(signature = (gravity, forces, prescribed, dt, steps, actuation, mass_damping = 0.0, stiffness_damping = 0.0, initial_positions = None, initial_velocities = None, tolerance = None, max_iterations = None, save_every = 1, *, options = None, method = "modified"))]
     #[allow(clippy::too_many_arguments)]
     fn simulate<'py>(
         &mut self,
@@ -275,6 +276,7 @@ impl Model {
         max_iterations: Option<usize>,
         save_every: usize,
         options: Option<PyRef<'py, SolveOptions>>,
+        method: &str,
     ) -> PyResult<Bound<'py, PyDict>> {
         let n = self.inner.mesh().n_nodes();
         let loads = convert::loads(py, n, gravity, forces, prescribed)?;
@@ -288,14 +290,18 @@ impl Model {
         };
         let x0 = flat("initial_positions", initial_positions)?;
         let v0 = flat("initial_velocities", initial_velocities)?;
-        let options = Self::solve_options(py, options.as_deref(), tolerance, max_iterations, None)?;
+        let options = sorofem_core::DynamicsOptions {
+            newton: Self::solve_options(py, options.as_deref(), tolerance, max_iterations, None)?,
+            method: sorofem_core::StepMethod::from_name(method).py(py)?,
+            save_every,
+        };
         let damping = sorofem_core::Damping {
             mass: mass_damping,
             stiffness: stiffness_damping,
         };
         let inner = &mut self.inner;
         let trajectory = guarded(py, || {
-            inner.simulate(
+            inner.simulate_with(
                 &loads,
                 dt,
                 steps,
@@ -304,7 +310,6 @@ impl Model {
                 x0.as_deref(),
                 v0.as_deref(),
                 &options,
-                save_every,
             )
         })?;
         let out = PyDict::new(py);
@@ -335,7 +340,10 @@ impl Model {
             PyArray1::from_slice(py, &trajectory.kinetic_energy),
         )?;
         out.set_item("iterations", trajectory.iterations)?;
+        out.set_item("factorizations", trajectory.factorizations)?;
+        out.set_item("residuals", trajectory.residuals)?;
         out.set_item("cutbacks", trajectory.cutbacks)?;
+        out.set_item("timings", timings_to_dict(py, &trajectory.timings)?)?;
         Ok(out)
     }
 

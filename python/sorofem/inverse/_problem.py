@@ -133,7 +133,7 @@ class Problem:
             self.forward_solves += 1
             try:
                 out = model.solve(
-                    g, self.forces.copy(), self.prescribed.copy(), init, opts.tolerance, opts.max_iterations, steps,
+                    g, self.forces.copy(), self.prescribed.copy(), init, options=opts.replace(load_steps=steps).to_core(),
                 )
             except SolverError:  # no convergence, or a singular (unstable) Hessian
                 self._tick()

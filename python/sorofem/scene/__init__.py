@@ -56,6 +56,7 @@ Schema
     tolerance = 1e-8           # Newton stops when the residual norm over the load norm is below this
     max_iterations = 50        # Newton iterations per load step
     load_steps = 1             # equal load increments (the solver may cut a step back)
+    max_cutbacks = 8           # times a failed load step may be halved before the solve gives up
 
     [[cable]]                  # optional: A cable of unilateral springs embedded in the mesh (sorofem.Cable):
                                # points, or start + direction + length + divisions.

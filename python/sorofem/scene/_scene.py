@@ -258,8 +258,8 @@ class Scene:
 
     @property
     def solver(self) -> dict[str, Any]:
-        """``[solver]`` as keyword arguments of :func:`sorofem.solve_static` (``tolerance``,
-        ``max_iterations``, ``load_steps``): :attr:`solve_options` as a dict."""
+        """The ``[solver]`` table: :attr:`solve_options` as a dict (pass ``options=`` that object
+        to :func:`sorofem.solve_static`)."""
         return self.solve_options.to_dict()
 
     def solve(self, *, body: Body | None = None, initial: StaticResult | None = None) -> StaticResult:

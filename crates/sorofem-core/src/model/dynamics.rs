@@ -1,17 +1,91 @@
 //! Dynamics: implicit Euler in time, each step a minimisation of the incremental potential
-//! through the same Newton solver as statics.
+//! through the same Newton solver as statics (docs/theory.md, "Dynamics", has the equations,
+//! the step methods and their measured accuracy).
 
-use super::system::{StepTerms, System};
+use super::system::{FactorReuse, StepTerms, System};
 use super::{Loads, Model};
-use crate::energy::HessianMode;
 use crate::error::{Error, Result};
 use crate::newton::{self, NewtonOptions};
+use crate::report::{SolveReport, Timings};
 
-/// Rayleigh damping `C = mass M + stiffness K` (1/s and s).
-#[derive(Clone, Copy, Debug, Default)]
+/// How many times a time step may be halved (a step becomes at most 64 sub-steps).
+pub(crate) const MAX_STEP_SPLITS: usize = 6;
+
+/// Rayleigh damping: `mass` alpha_M (1/s), `stiffness` beta_K (s).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Damping {
     pub mass: f64,
     pub stiffness: f64,
+}
+
+/// How each time step's minimisation is solved.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum StepMethod {
+    /// Newton's method with a fresh factorisation of the step's Hessian at every iteration.
+    Newton,
+    /// Modified Newton: directions from a factorisation kept across iterations and steps,
+    /// refactorised where the residual falls by less than a quarter in an iteration. Converges
+    /// to the same tolerance as [`StepMethod::Newton`], so the trajectories agree to it.
+    #[default]
+    Modified,
+    /// One iteration of [`StepMethod::Modified`] per step, converged or not (the linearised
+    /// step of SOFA's implicit Euler, with a kept factorisation): fast and less accurate; each
+    /// step's remaining residual is reported.
+    LinearlyImplicit,
+}
+
+impl StepMethod {
+    /// Lower-case names, as the Python API takes them.
+    pub fn name(self) -> &'static str {
+        match self {
+            StepMethod::Newton => "newton",
+            StepMethod::Modified => "modified",
+            StepMethod::LinearlyImplicit => "linearly_implicit",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Result<Self> {
+        [
+            StepMethod::Newton,
+            StepMethod::Modified,
+            StepMethod::LinearlyImplicit,
+        ]
+        .into_iter()
+        .find(|m| m.name() == name)
+        .ok_or_else(|| {
+            Error::invalid(
+                "method",
+                "'newton', 'modified' or 'linearly_implicit'",
+                format!("{name:?}"),
+            )
+        })
+    }
+}
+
+/// The residual must fall at least this much per modified-Newton iteration, or the next one
+/// refactorises. Lower refactorises more often (each costs an assembly and a factorisation,
+/// several kept-factor iterations' worth); higher lets slow linear convergence run on.
+const MAX_CONTRACTION: f64 = 0.25;
+
+/// The settings of a simulation besides its loads, schedule, damping and start.
+#[derive(Clone, Debug)]
+pub struct DynamicsOptions {
+    /// Each step's Newton settings (`load_steps` and `max_cutbacks` are not used: a failed
+    /// step is halved instead).
+    pub newton: NewtonOptions,
+    pub method: StepMethod,
+    /// Save every this many steps (the initial and the last state are always saved).
+    pub save_every: usize,
+}
+
+impl Default for DynamicsOptions {
+    fn default() -> Self {
+        DynamicsOptions {
+            newton: NewtonOptions::default(),
+            method: StepMethod::default(),
+            save_every: 1,
+        }
+    }
 }
 
 /// Frames of a dynamic simulation.
@@ -27,18 +101,65 @@ pub struct Trajectory {
     pub velocities: Vec<f64>,
     /// Newton iterations of every step (a cut step counts its sub-steps' sum).
     pub iterations: Vec<usize>,
+    /// Numeric factorisations of every step (the same way).
+    pub factorizations: Vec<usize>,
+    /// The relative residual every step ended with (its last sub-step's): below the tolerance
+    /// unless the method is [`StepMethod::LinearlyImplicit`].
+    pub residuals: Vec<f64>,
     /// Times a step was halved after a Newton failure.
     pub cutbacks: usize,
+    /// Seconds per phase over all steps.
+    pub timings: Timings,
+}
+
+/// The state between two steps: every unknown (full DOFs), the velocity of the free ones, and
+/// the step before (for the extrapolated start).
+#[derive(Clone, Debug)]
+pub(crate) struct StepState {
+    pub(crate) z: Vec<f64>,
+    pub(crate) velocity: Vec<f64>,
+    pub(crate) before: Option<StepBefore>,
+}
+
+/// The free values and velocities at the start of the last step, and its length.
+#[derive(Clone, Debug)]
+pub(crate) struct StepBefore {
+    values: Vec<f64>,
+    velocity: Vec<f64>,
+    h: f64,
+}
+
+/// Where the last simulation ended, so that one continuing it (starting from its final
+/// positions and velocities, as a chunked run does) goes on exactly as a single run would: the
+/// state the positions alone do not carry (pressures, free cable nodes and their velocities,
+/// the step before) and the kept factorisation.
+#[derive(Clone, Debug)]
+pub(crate) struct Continuation {
+    positions: Vec<f64>,
+    velocities: Vec<f64>,
+    state: StepState,
+    reuse: FactorReuse,
+}
+
+/// What does not change from step to step of one simulation.
+pub(crate) struct StepSetup {
+    /// Full DOF of each free DOF.
+    pub(crate) free: Vec<usize>,
+    /// Mass (kg) of each free DOF (zero on pressures).
+    pub(crate) mass: Vec<f64>,
+    /// Position of each free DOF's diagonal entry in the Hessian pattern.
+    diagonal: Vec<usize>,
+    /// Free DOFs that are displacements (the pressures, mixed only, come after them).
+    pub(crate) n_displacement: usize,
+    pub(crate) full_load: Vec<f64>,
+    prescribed: Vec<[f64; 3]>,
+    pub(crate) damping: Damping,
+    method: StepMethod,
+    newton: NewtonOptions,
 }
 
 impl Model {
-    /// Implicit Euler in time: each step minimises the incremental potential
-    /// `1/2 |u - u_n - h v_n|_M^2 / h^2 + 1/2 |u - u_n|_D^2 / h + Pi(u)` (lumped mass M,
-    /// Rayleigh damping `D = alpha_M M + beta_K K_n`), then `v = (u - u_n) / h`. A step whose
-    /// Newton solve fails is split in two, up to six times. `actuation[s][c]` is cable c's
-    /// alpha during step s. Starts from `initial_positions` (3 n, m; default rest; free cable nodes
-    /// and pressures then continue from the last solve) at rest or with `initial_velocities`
-    /// (3 n, m/s).
+    /// [`Model::simulate_with`] with the default [`StepMethod`].
     #[allow(clippy::too_many_arguments)]
     pub fn simulate(
         &mut self,
@@ -52,86 +173,64 @@ impl Model {
         options: &NewtonOptions,
         save_every: usize,
     ) -> Result<Trajectory> {
-        self.require_material("simulate")?;
-        self.check_loads(loads)?;
-        if !(dt > 0.0 && dt.is_finite()) {
-            return Err(Error::invalid("dt", "a time step > 0 s", dt));
-        }
-        if actuation.len() != steps || actuation.iter().any(|row| row.len() != self.n_cables()) {
-            return Err(Error::shape(
-                "actuation",
-                format!(
-                    "({steps}, {}): one alpha per step and cable",
-                    self.n_cables()
-                ),
-                format!("{} rows", actuation.len()),
-            ));
-        }
-        if !(damping.mass >= 0.0 && damping.stiffness >= 0.0) {
-            return Err(Error::invalid(
-                "damping",
-                "Rayleigh coefficients >= 0",
-                format!("{damping:?}"),
-            ));
-        }
-        let n = self.mesh.n_nodes();
-        let prescribed = self.prescribed(loads);
-        let full_load = self.load_vector(loads);
-        let rest = self.mesh.rest_flat();
-        let mut z = self.start_state("initial_positions", initial_positions)?;
-        let free: Vec<usize> = self.assembler.full_of_free().to_vec();
-        let mass_full = self.terms.mass.per_dof(self.layout.n_full());
-        let mass: Vec<f64> = free.iter().map(|&d| mass_full[d]).collect();
-        let mut velocity = vec![0.0; free.len()];
-        if let Some(v) = initial_velocities {
-            if v.len() != 3 * n {
-                return Err(Error::shape(
-                    "initial_velocities",
-                    format!("({n}, 3)"),
-                    format!("{} values", v.len()),
-                ));
-            }
-            crate::error::check_finite("initial_velocities", v)?;
-            for (f, &d) in free.iter().enumerate() {
-                if d < 3 * n {
-                    velocity[f] = v[d];
-                }
-            }
-        }
-        let diagonal: Vec<usize> = (0..free.len())
-            .map(|f| {
-                self.assembler
-                    .pattern()
-                    .position(f, f)
-                    .expect("diagonal in pattern")
-            })
-            .collect();
-        // Pressures (mixed formulation) are never fixed and come last among the free DOFs.
-        let n_free_displacement = free.len() - if self.layout.pressures { n } else { 0 };
-        let step_options = NewtonOptions {
-            load_steps: 1,
-            max_cutbacks: 0,
-            ..options.clone()
+        let options = DynamicsOptions {
+            newton: options.clone(),
+            save_every,
+            ..Default::default()
         };
+        self.simulate_with(
+            loads,
+            dt,
+            steps,
+            actuation,
+            damping,
+            initial_positions,
+            initial_velocities,
+            &options,
+        )
+    }
+
+    /// Implicit Euler in time: step n minimises the incremental potential (see
+    /// [`super::system::StepTerms`]) `1/2 |u - u_n - h v_n|_M^2 / h^2 + 1/2 alpha_M |u - u_n|_M^2
+    /// / h + Pi(u) + beta_K / h (Pi_int(u) - F(u_n) . u)` (lumped mass M, Rayleigh damping
+    /// alpha_M and beta_K), then `v = (u - u_n) / h`. Each step starts Newton from the
+    /// quadratic extrapolation of the last three states. A step whose solve fails is split in
+    /// two, up to six times. `actuation[s][c]` is cable c's alpha during step s. Starts from
+    /// `initial_positions` (3 n, m; default rest; free cable nodes and pressures then continue
+    /// from the last solve) at rest or with `initial_velocities` (3 n, m/s); a simulation that
+    /// starts where the last one ended (its final positions and velocities) continues it
+    /// exactly (see `Continuation`).
+    #[allow(clippy::too_many_arguments)]
+    pub fn simulate_with(
+        &mut self,
+        loads: &Loads,
+        dt: f64,
+        steps: usize,
+        actuation: &[Vec<f64>],
+        damping: Damping,
+        initial_positions: Option<&[f64]>,
+        initial_velocities: Option<&[f64]>,
+        options: &DynamicsOptions,
+    ) -> Result<Trajectory> {
+        let setup = self.step_setup(loads, dt, steps, actuation, damping, options)?;
+        let start = self.start_of_run(&setup, initial_positions, initial_velocities)?;
+        self.integrate(&setup, dt, actuation, options.save_every, start)
+    }
+
+    /// The steps of a simulation from `start`.
+    pub(crate) fn integrate(
+        &mut self,
+        setup: &StepSetup,
+        dt: f64,
+        actuation: &[Vec<f64>],
+        save_every: usize,
+        start: (StepState, FactorReuse),
+    ) -> Result<Trajectory> {
+        let (mut state, mut reuse) = start;
+        let steps = actuation.len();
+        let n = self.mesh.n_nodes();
         let mut trajectory = Trajectory::default();
-        let save =
-            |model: &Model, z: &[f64], velocity: &[f64], t: f64, trajectory: &mut Trajectory| {
-                trajectory.times.push(t);
-                trajectory
-                    .positions
-                    .push((0..3 * n).map(|i| rest[i] + z[i]).collect());
-                trajectory
-                    .cable_points
-                    .push(model.terms.cables.points_at(z));
-                trajectory.kinetic_energy.push(
-                    0.5 * mass
-                        .iter()
-                        .zip(velocity)
-                        .map(|(m, v)| m * v * v)
-                        .sum::<f64>(),
-                );
-            };
-        save(self, &z, &velocity, 0.0, &mut trajectory);
+        self.save_frame(setup, &state, 0.0, &mut trajectory);
         let mut time = 0.0;
         for (s, alphas) in actuation.iter().enumerate() {
             for (c, &alpha) in alphas.iter().enumerate() {
@@ -139,79 +238,22 @@ impl Model {
             }
             // Halve the step on failure: a queue of sub-steps that must add up to dt.
             let mut pending = vec![(dt, 0usize)];
-            let mut iterations = 0;
+            let (mut iterations, mut factorizations, mut residual) = (0, 0, 0.0);
             while let Some((h, depth)) = pending.pop() {
-                let previous: Vec<f64> = free.iter().map(|&d| z[d]).collect();
-                let predicted: Vec<f64> = previous
-                    .iter()
-                    .zip(&velocity)
-                    .map(|(u, v)| u + h * v)
-                    .collect();
-                let stiffness_damping = if damping.stiffness > 0.0 {
-                    let mut k = self
-                        .assembler
-                        .evaluate(
-                            &self.terms.internal(),
-                            &z,
-                            false,
-                            Some(HessianMode::Projected),
-                        )
-                        .hessian;
-                    let pattern = self.assembler.pattern();
-                    for col in 0..pattern.n {
-                        for p in pattern.col_ptr[col]..pattern.col_ptr[col + 1] {
-                            let row = pattern.row_idx[p];
-                            k[p] = if row < n_free_displacement && col < n_free_displacement {
-                                k[p] * damping.stiffness / h
-                            } else {
-                                0.0
-                            };
-                        }
-                    }
-                    k
-                } else {
-                    Vec::new()
+                let outcome = self.time_step(setup, &mut state, h, &mut reuse);
+                let report = match &outcome {
+                    Ok(report) => report,
+                    Err(Error::NotConverged { report, .. }) => report,
+                    Err(_) => &SolveReport::default(),
                 };
-                let step = StepTerms {
-                    inertia: mass.iter().map(|m| m / (h * h)).collect(),
-                    predicted: predicted.clone(),
-                    previous: previous.clone(),
-                    mass_damping: mass.iter().map(|m| damping.mass * m / h).collect(),
-                    stiffness_damping,
-                    diagonal: diagonal.clone(),
-                };
-                let mut trial = z.clone();
-                for (f, &d) in free.iter().enumerate() {
-                    if f < n_free_displacement {
-                        trial[d] = predicted[f];
-                    }
-                }
-                let mut problem = System::new(
-                    self,
-                    full_load.clone(),
-                    prescribed.clone(),
-                    Some(step),
-                    options,
-                );
-                problem.model.terms.cables.begin_step(h, &z);
-                let outcome =
-                    rayon::scope(|_| newton::solve(&mut problem, &mut trial, &step_options));
-                problem.model.terms.cables.end_step();
-                drop(problem);
+                iterations += report.iterations;
+                factorizations += report.timings.factorizations;
+                add_timings(&mut trajectory.timings, &report.timings);
                 match outcome {
                     Ok(report) => {
-                        iterations += report.iterations;
-                        for (f, &d) in free.iter().enumerate() {
-                            velocity[f] = if f < n_free_displacement {
-                                (trial[d] - previous[f]) / h
-                            } else {
-                                0.0
-                            };
-                        }
-                        z = trial;
+                        residual = report.residual_history.last().copied().unwrap_or(0.0);
                     }
-                    Err(Error::NotConverged { report, .. }) if depth < 6 => {
-                        iterations += report.iterations;
+                    Err(Error::NotConverged { .. }) if depth < MAX_STEP_SPLITS => {
                         trajectory.cutbacks += 1;
                         pending.push((h / 2.0, depth + 1));
                         pending.push((h / 2.0, depth + 1));
@@ -229,20 +271,323 @@ impl Model {
             }
             time += dt;
             trajectory.iterations.push(iterations);
+            trajectory.factorizations.push(factorizations);
+            trajectory.residuals.push(residual);
             if (s + 1) % save_every.max(1) == 0 || s + 1 == steps {
-                save(self, &z, &velocity, time, &mut trajectory);
+                self.save_frame(setup, &state, time, &mut trajectory);
             }
         }
-        let mut v_nodes = vec![0.0; 3 * n];
-        for (f, &d) in free.iter().enumerate() {
-            if d < 3 * n {
-                v_nodes[d] = velocity[f];
-            }
-        }
-        trajectory.velocities = v_nodes;
-        self.last_extra = Some(z[3 * n..].to_vec());
+        let velocities = setup.node_velocities(n, &state.velocity);
+        trajectory.velocities = velocities.clone();
+        self.last_extra = Some(state.z[3 * n..].to_vec());
         self.last_state = None;
         self.factor_at_solution = false;
+        self.continuation = Some(Continuation {
+            positions: trajectory.positions.last().cloned().unwrap_or_default(),
+            velocities,
+            state,
+            reuse,
+        });
         Ok(trajectory)
     }
+
+    /// Checks the arguments of a simulation and gathers what its steps share.
+    pub(crate) fn step_setup(
+        &self,
+        loads: &Loads,
+        dt: f64,
+        steps: usize,
+        actuation: &[Vec<f64>],
+        damping: Damping,
+        options: &DynamicsOptions,
+    ) -> Result<StepSetup> {
+        self.require_material("simulate")?;
+        self.check_loads(loads)?;
+        options.newton.validate()?;
+        if !(dt > 0.0 && dt.is_finite()) {
+            return Err(Error::invalid("dt", "a time step > 0 s", dt));
+        }
+        if actuation.len() != steps || actuation.iter().any(|row| row.len() != self.n_cables()) {
+            return Err(Error::shape(
+                "actuation",
+                format!(
+                    "({steps}, {}): one alpha per step and cable",
+                    self.n_cables()
+                ),
+                format!("{} rows", actuation.len()),
+            ));
+        }
+        for (name, value) in [
+            ("mass_damping", damping.mass),
+            ("stiffness_damping", damping.stiffness),
+        ] {
+            if !(value >= 0.0 && value.is_finite()) {
+                return Err(Error::invalid(
+                    name,
+                    "a finite Rayleigh coefficient >= 0",
+                    value,
+                ));
+            }
+        }
+        let n = self.mesh.n_nodes();
+        let free: Vec<usize> = self.assembler.full_of_free().to_vec();
+        let mass_full = self.terms.mass.per_dof(self.layout.n_full());
+        let mass: Vec<f64> = free.iter().map(|&d| mass_full[d]).collect();
+        let pattern = self.assembler.pattern();
+        let diagonal = (0..free.len())
+            .map(|f| pattern.position(f, f).expect("diagonal in pattern"))
+            .collect();
+        // Pressures (mixed formulation) are never fixed and come last among the free DOFs.
+        let n_displacement = free.len() - if self.layout.pressures { n } else { 0 };
+        Ok(StepSetup {
+            free,
+            mass,
+            diagonal,
+            n_displacement,
+            full_load: self.load_vector(loads),
+            prescribed: self.prescribed(loads),
+            damping,
+            method: options.method,
+            newton: NewtonOptions {
+                load_steps: 1,
+                max_cutbacks: 0,
+                ..options.newton.clone()
+            },
+        })
+    }
+
+    /// The state a simulation starts from, and the factorisation it may keep: the end of the
+    /// last simulation when it continues it, else `initial_positions` and `initial_velocities`.
+    pub(crate) fn start_of_run(
+        &mut self,
+        setup: &StepSetup,
+        initial_positions: Option<&[f64]>,
+        initial_velocities: Option<&[f64]>,
+    ) -> Result<(StepState, FactorReuse)> {
+        let n = self.mesh.n_nodes();
+        if let Some(v) = initial_velocities {
+            if v.len() != 3 * n {
+                return Err(Error::shape(
+                    "initial_velocities",
+                    format!("({n}, 3)"),
+                    format!("{} values", v.len()),
+                ));
+            }
+            crate::error::check_finite("initial_velocities", v)?;
+        }
+        let z = self.start_state("initial_positions", initial_positions)?;
+        if let (Some(x), Some(v), Some(last)) = (
+            initial_positions,
+            initial_velocities,
+            self.continuation.take(),
+        ) {
+            if x == last.positions.as_slice() && v == last.velocities.as_slice() {
+                return Ok((last.state, last.reuse));
+            }
+        }
+        let mut velocity = vec![0.0; setup.free.len()];
+        if let Some(v) = initial_velocities {
+            for (f, &d) in setup.free.iter().enumerate() {
+                if d < 3 * n {
+                    velocity[f] = v[d];
+                }
+            }
+        }
+        let state = StepState {
+            z,
+            velocity,
+            before: None,
+        };
+        Ok((state, FactorReuse::new(MAX_CONTRACTION)))
+    }
+
+    fn save_frame(
+        &self,
+        setup: &StepSetup,
+        state: &StepState,
+        t: f64,
+        trajectory: &mut Trajectory,
+    ) {
+        let n = self.mesh.n_nodes();
+        let rest = self.mesh.rest_flat();
+        trajectory.times.push(t);
+        trajectory
+            .positions
+            .push((0..3 * n).map(|i| rest[i] + state.z[i]).collect());
+        trajectory
+            .cable_points
+            .push(self.terms.cables.points_at(&state.z));
+        trajectory.kinetic_energy.push(
+            0.5 * (setup.mass.iter().zip(&state.velocity))
+                .map(|(m, v)| m * v * v)
+                .sum::<f64>(),
+        );
+    }
+
+    /// One implicit Euler step of length `h` from `state`, solved by the setup's method with
+    /// the factorisation `reuse` keeps; `state` moves to its end when it converges.
+    pub(crate) fn time_step(
+        &mut self,
+        setup: &StepSetup,
+        state: &mut StepState,
+        h: f64,
+        reuse: &mut FactorReuse,
+    ) -> Result<SolveReport> {
+        let previous: Vec<f64> = setup.free.iter().map(|&d| state.z[d]).collect();
+        let step = self.step_terms(setup, state, &previous, h);
+        let mut trial = state.z.clone();
+        // The extrapolation amplifies the errors a linearly implicit step leaves in the
+        // velocities; it starts from the inertial prediction instead.
+        let before = match setup.method {
+            StepMethod::LinearlyImplicit => None,
+            _ => state.before.as_ref(),
+        };
+        for (f, &d) in setup.free.iter().enumerate() {
+            trial[d] = setup.start_value(f, &previous, &state.velocity, before, h);
+        }
+        let mut problem = System::new(
+            self,
+            setup.full_load.clone(),
+            setup.prescribed.clone(),
+            Some(step),
+            &setup.newton,
+        );
+        if setup.method != StepMethod::Newton {
+            reuse.last_norm = None;
+            problem.reuse = Some(reuse.clone());
+        }
+        // The step scales the internal energy, dashpots included, by 1 + beta_K / h; a dashpot
+        // over h + beta_K keeps their force at c dL/dt.
+        problem
+            .model
+            .terms
+            .cables
+            .begin_step(h + setup.damping.stiffness, &state.z);
+        let outcome = rayon::scope(|_| match setup.method {
+            StepMethod::LinearlyImplicit => {
+                newton::single_iteration(&mut problem, &mut trial, &setup.newton)
+            }
+            _ => newton::solve(&mut problem, &mut trial, &setup.newton),
+        });
+        problem.model.terms.cables.end_step();
+        if let Some(kept) = problem.reuse.take() {
+            *reuse = kept;
+        }
+        drop(problem);
+        // A failed step, or a single iteration that reduced the residual too little, says the
+        // kept factorisation no longer fits: the next step starts with a fresh one (a linearly
+        // implicit step has no second iteration in which to notice).
+        let contracted = match &outcome {
+            Ok(report) => match report.residual_history.as_slice() {
+                [first, .., last] => *last <= MAX_CONTRACTION * first,
+                _ => true,
+            },
+            Err(_) => false,
+        };
+        if !contracted {
+            reuse.kept = None;
+        }
+        if outcome.is_ok() {
+            let velocity = std::mem::take(&mut state.velocity);
+            state.velocity = (0..setup.free.len())
+                .map(|f| {
+                    if f < setup.n_displacement {
+                        (trial[setup.free[f]] - previous[f]) / h
+                    } else {
+                        0.0
+                    }
+                })
+                .collect();
+            state.before = Some(StepBefore {
+                values: previous,
+                velocity,
+                h,
+            });
+            state.z = trial;
+        }
+        outcome
+    }
+
+    /// The inertia and damping of a step of length `h` from `state` (`previous`: its free
+    /// values). The stiffness damping's start force is the internal force at the step's start
+    /// with the step's actuation.
+    pub(super) fn step_terms(
+        &self,
+        setup: &StepSetup,
+        state: &StepState,
+        previous: &[f64],
+        h: f64,
+    ) -> StepTerms {
+        let (alpha_m, beta_k) = (setup.damping.mass, setup.damping.stiffness);
+        let start_force = if beta_k > 0.0 {
+            let mut force = self
+                .assembler
+                .evaluate(&self.terms.internal(), &state.z, true, None)
+                .gradient;
+            force.iter_mut().for_each(|f| *f *= beta_k / h);
+            force[setup.n_displacement..].fill(0.0);
+            force
+        } else {
+            Vec::new()
+        };
+        StepTerms {
+            inertia: setup.mass.iter().map(|m| m / (h * h)).collect(),
+            predicted: (previous.iter().zip(&state.velocity))
+                .map(|(u, v)| u + h * v)
+                .collect(),
+            previous: previous.to_vec(),
+            mass_damping: setup.mass.iter().map(|m| alpha_m * m / h).collect(),
+            internal_scale: 1.0 + beta_k / h,
+            start_force,
+            diagonal: setup.diagonal.clone(),
+        }
+    }
+}
+
+impl StepSetup {
+    /// Where Newton starts free DOF `f` of a step of length `h`: displacements on the
+    /// parabola through the last three states (`u_n + h v_n + h^2 (v_n - v_(n-1)) / h_(n-1)`),
+    /// pressures on the line through the last two; without a step before, the inertial
+    /// prediction `u_n + h v_n` and the last pressures.
+    fn start_value(
+        &self,
+        f: usize,
+        previous: &[f64],
+        velocity: &[f64],
+        before: Option<&StepBefore>,
+        h: f64,
+    ) -> f64 {
+        let u = previous[f];
+        match before {
+            None if f < self.n_displacement => u + h * velocity[f],
+            None => u,
+            Some(before) if f < self.n_displacement => {
+                u + h * velocity[f] + h * h * (velocity[f] - before.velocity[f]) / before.h
+            }
+            Some(before) => u + h * (u - before.values[f]) / before.h,
+        }
+    }
+
+    /// Node velocities (3 n) from the free DOFs' velocities.
+    pub(crate) fn node_velocities(&self, n: usize, velocity: &[f64]) -> Vec<f64> {
+        let mut v = vec![0.0; 3 * n];
+        for (f, &d) in self.free.iter().enumerate() {
+            if d < 3 * n {
+                v[d] = velocity[f];
+            }
+        }
+        v
+    }
+}
+
+/// Adds `b`'s seconds and counts to `a`'s.
+fn add_timings(a: &mut Timings, b: &Timings) {
+    a.assembly += b.assembly;
+    a.factorization += b.factorization;
+    a.failed_factorization += b.failed_factorization;
+    a.solve += b.solve;
+    a.line_search += b.line_search;
+    a.total += b.total;
+    a.factorizations += b.factorizations;
+    a.failed_factorizations += b.failed_factorizations;
 }

@@ -11,7 +11,7 @@ pub mod statics;
 mod system;
 pub(crate) mod terms;
 
-pub use dynamics::{Damping, Trajectory};
+pub use dynamics::{Damping, DynamicsOptions, StepMethod, Trajectory};
 pub use layout::DofLayout;
 pub use statics::{Loads, Solution};
 
@@ -71,6 +71,8 @@ pub struct Model {
     pub(crate) last_state: Option<(Vec<f64>, Loads)>,
     /// The factorisation holds the Hessian at `last_state` (not a Newton iterate's).
     pub(crate) factor_at_solution: bool,
+    /// Where the last simulation ended (see `dynamics::Continuation`).
+    pub(crate) continuation: Option<dynamics::Continuation>,
 }
 
 impl Model {
@@ -174,6 +176,7 @@ impl Model {
             hessian_scratch: Default::default(),
             pressure_weight: 1.0,
             last_extra: None,
+            continuation: None,
             material_set: false,
             last_state: None,
             factor_at_solution: false,

@@ -6,7 +6,6 @@ use super::{Formulation, Model};
 use crate::energy::pressure_iterates::{PressureIterates, PressureLinearisations};
 use crate::energy::HessianMode;
 use crate::error::Result;
-use crate::linear::LowerPattern;
 use crate::newton::{AuxiliaryIterates, Merit, NewtonOptions, NewtonProblem};
 use crate::report::Timings;
 use std::time::Instant;
@@ -32,6 +31,8 @@ pub(super) struct System<'a> {
     pressure_base: Vec<f64>,
     /// The model's Hessian scratch holds the exact Hessian at the state last evaluated.
     hessian_prepared: bool,
+    /// Directions from a kept factorisation (dynamics), when set.
+    pub(super) reuse: Option<FactorReuse>,
 }
 
 /// The pressure iterates belong to one solve: the model's Hessians are exact again afterwards
@@ -42,66 +43,87 @@ impl Drop for System<'_> {
     }
 }
 
-/// The quadratic terms implicit Euler adds to the energy (free DOFs `d`):
-/// `1/2 sum_d inertia_d (u_d - predicted_d)^2 + 1/2 (u - previous)^T D (u - previous)` with
-/// `inertia = m / h^2` and the Rayleigh damping `D = (alpha_M M + beta_K K_n) / h`, `K_n` the
-/// projected (positive semi-definite) displacement Hessian at the start of the step.
+/// What implicit Euler adds to the energy of a step of length `h` (free DOFs `d`, `u` their
+/// values, `u_n` those at the step's start):
+///
+/// ```text
+/// E(z) = 1/2 sum_d inertia_d (u_d - predicted_d)^2 + 1/2 sum_d mass_damping_d (u_d - u_n,d)^2
+///      + internal_scale Pi_int(z) - start_force . (u - u_n)
+/// ```
+///
+/// with `inertia = m / h^2`, `mass_damping = alpha_M m / h`, `internal_scale = 1 + beta_K / h`
+/// and `start_force = beta_K / h F(z_n)` (F the internal force, displacement rows only): its
+/// stationarity is `M (u - u_n - h v_n) / h^2 + alpha_M M (u - u_n) / h + F(z) + beta_K (F(z) -
+/// F(z_n)) / h = f`. The Rayleigh stiffness damping is `beta_K` times the rate of the internal
+/// force over the step, which is `beta_K K(u) v` as h -> 0 (docs/theory.md, "Dynamics").
 pub(super) struct StepTerms {
     pub(super) inertia: Vec<f64>,
     pub(super) predicted: Vec<f64>,
     pub(super) previous: Vec<f64>,
     pub(super) mass_damping: Vec<f64>,
-    /// `beta_K / h K_n` in the Hessian's lower-triangle layout (empty without stiffness damping).
-    pub(super) stiffness_damping: Vec<f64>,
+    pub(super) internal_scale: f64,
+    /// `beta_K / h F(z_n)` on the free DOFs (empty without stiffness damping).
+    pub(super) start_force: Vec<f64>,
     pub(super) diagonal: Vec<usize>,
 }
 
 impl StepTerms {
-    fn energy(&self, free: &[f64], pattern: &LowerPattern) -> f64 {
+    fn energy(&self, free: &[f64]) -> f64 {
         let mut e = 0.0;
         for d in 0..free.len() {
             let a = free[d] - self.predicted[d];
             let b = free[d] - self.previous[d];
             e += 0.5 * (self.inertia[d] * a * a + self.mass_damping[d] * b * b);
         }
-        if !self.stiffness_damping.is_empty() {
-            let delta: Vec<f64> = free
-                .iter()
-                .zip(&self.previous)
-                .map(|(x, y)| x - y)
-                .collect();
-            let kd = pattern.symmetric_matvec(&self.stiffness_damping, &delta);
-            e += 0.5 * kd.iter().zip(&delta).map(|(a, b)| a * b).sum::<f64>();
+        for ((f, x), y) in self.start_force.iter().zip(free).zip(&self.previous) {
+            e -= f * (x - y);
         }
         e
     }
 
-    fn add_gradient(&self, free: &[f64], pattern: &LowerPattern, g: &mut [f64]) {
+    fn add_gradient(&self, free: &[f64], g: &mut [f64]) {
         for d in 0..free.len() {
             g[d] += self.inertia[d] * (free[d] - self.predicted[d])
                 + self.mass_damping[d] * (free[d] - self.previous[d]);
         }
-        if !self.stiffness_damping.is_empty() {
-            let delta: Vec<f64> = free
-                .iter()
-                .zip(&self.previous)
-                .map(|(x, y)| x - y)
-                .collect();
-            for (gi, kd) in g
-                .iter_mut()
-                .zip(pattern.symmetric_matvec(&self.stiffness_damping, &delta))
-            {
-                *gi += kd;
-            }
+        for (gi, f) in g.iter_mut().zip(&self.start_force) {
+            *gi -= f;
         }
     }
 
-    fn add_hessian(&self, hessian: &mut [f64]) {
+    /// Turns the internal Hessian's values into the step's.
+    fn apply_to_hessian(&self, hessian: &mut [f64]) {
+        if self.internal_scale != 1.0 {
+            hessian.iter_mut().for_each(|h| *h *= self.internal_scale);
+        }
         for (d, &p) in self.diagonal.iter().enumerate() {
             hessian[p] += self.inertia[d] + self.mass_damping[d];
         }
-        for (h, k) in hessian.iter_mut().zip(&self.stiffness_damping) {
-            *h += k;
+    }
+}
+
+/// Modified Newton for a sequence of solves (the steps of a simulation): directions
+/// `d = -H_kept^{-1} g` from a factorisation kept across iterations and solves, until the
+/// residual falls by less than `max_ratio` in an iteration (or the kept factor gives no
+/// descent direction); the next direction then factorises the Hessian at its iterate.
+#[derive(Clone, Debug)]
+pub(crate) struct FactorReuse {
+    /// The model factor's [`crate::linear::SparseFactor::generation`] when it was kept.
+    pub(crate) kept: Option<u64>,
+    /// The residual norm at the last direction of the current solve.
+    pub(crate) last_norm: Option<f64>,
+    pub(crate) max_ratio: f64,
+    /// Directions computed with the kept factorisation.
+    pub(crate) reused: usize,
+}
+
+impl FactorReuse {
+    pub(crate) fn new(max_ratio: f64) -> Self {
+        FactorReuse {
+            kept: None,
+            last_norm: None,
+            max_ratio,
+            reused: 0,
         }
     }
 }
@@ -128,6 +150,7 @@ impl<'a> System<'a> {
             linearised_at_iterate: false,
             pressure_base: Vec::new(),
             hessian_prepared: false,
+            reuse: None,
         }
     }
 }
@@ -159,19 +182,75 @@ impl System<'_> {
             .collect()
     }
 
+    /// `-H^{-1} g` with the model's stored factorisation (in the mixed formulation `g`'s
+    /// pressure rows carry the pressure weight, which the solve takes back out).
+    fn solve_with_factor(&self, g: &[f64], timings: &mut Timings) -> Vec<f64> {
+        let t0 = Instant::now();
+        let mut d: Vec<f64> = g.iter().map(|v| -v).collect();
+        if self.is_mixed() {
+            let n = self.n_nodes();
+            let len = d.len();
+            d[len - n..]
+                .iter_mut()
+                .for_each(|v| *v /= self.model.pressure_weight);
+        }
+        self.model.factor.solve_in_place(&mut d);
+        timings.solve += t0.elapsed().as_secs_f64();
+        d
+    }
+
+    /// Whether `d` may serve as a direction for gradient `g`: a descent direction of the energy
+    /// (standard formulation). No inertia test for the mixed formulation: the condensed
+    /// curvature `du^T A du + dp^T C dp` cancels catastrophically when the pressure (and so
+    /// `K_geo(p)`) is large; finite values only.
+    fn is_usable(&self, d: &[f64], g: &[f64]) -> bool {
+        if self.is_mixed() {
+            d.iter().all(|v| v.is_finite())
+        } else {
+            d.iter().zip(g).map(|(a, b)| a * b).sum::<f64>() < 0.0
+        }
+    }
+
+    /// A direction from the kept factorisation of [`FactorReuse`], when there is one, the
+    /// residual fell enough since the last direction and it gives a usable direction.
+    fn kept_direction(
+        &mut self,
+        g: &[f64],
+        g_norm: f64,
+        timings: &mut Timings,
+    ) -> Option<Vec<f64>> {
+        let reuse = self.reuse.as_ref()?;
+        let slow = reuse
+            .last_norm
+            .is_some_and(|last| g_norm > reuse.max_ratio * last);
+        if slow || reuse.kept != Some(self.model.factor.generation()) {
+            return None;
+        }
+        let d = self.solve_with_factor(g, timings);
+        let usable = self.is_usable(&d, g);
+        let reuse = self.reuse.as_mut().expect("checked above");
+        if !usable {
+            return None;
+        }
+        reuse.last_norm = Some(g_norm);
+        reuse.reused += 1;
+        Some(d)
+    }
+
     /// The merit (see [`NewtonProblem::merit_and_gradient`]) from the terms' energy and
     /// gradient at `z`.
     fn merit_at(&self, z: &[f64], energy: f64, gradient: Vec<f64>) -> (f64, Vec<f64>) {
         if !energy.is_finite() {
             return (f64::INFINITY, vec![f64::INFINITY; gradient.len()]);
         }
+        let scale = self.step.as_ref().map_or(1.0, |step| step.internal_scale);
         let mut g = gradient;
         for (gi, &d) in g.iter_mut().zip(self.model.assembler.full_of_free()) {
-            *gi -= self.load[d];
+            *gi = scale * *gi - self.load[d];
         }
         let free_values = self.step.as_ref().map(|_| self.free_values(z));
         if let (Some(step), Some(free)) = (&self.step, &free_values) {
-            step.add_gradient(free, self.model.assembler.pattern(), &mut g);
+            step.add_gradient(free, &mut g);
         }
         if self.is_mixed() {
             let n = self.n_nodes();
@@ -185,9 +264,9 @@ impl System<'_> {
             return (0.5 * g.iter().map(|v| v * v).sum::<f64>(), g);
         }
         let external: f64 = self.load.iter().zip(z.iter()).map(|(f, x)| f * x).sum();
-        let mut energy = energy - external;
+        let mut energy = scale * energy - external;
         if let (Some(step), Some(free)) = (&self.step, &free_values) {
-            energy += step.energy(free, self.model.assembler.pattern());
+            energy += step.energy(free);
         }
         (energy, g)
     }
@@ -268,6 +347,12 @@ impl NewtonProblem for System<'_> {
         projected: bool,
         timings: &mut Timings,
     ) -> Result<Option<Vec<f64>>> {
+        let g_norm = g.iter().map(|v| v * v).sum::<f64>().sqrt();
+        if !projected {
+            if let Some(d) = self.kept_direction(g, g_norm, timings) {
+                return Ok(Some(d));
+            }
+        }
         let mode = if projected {
             HessianMode::Projected
         } else {
@@ -287,7 +372,7 @@ impl NewtonProblem for System<'_> {
         }
         self.hessian_prepared = false;
         if let Some(step) = &self.step {
-            step.add_hessian(&mut eval.hessian);
+            step.apply_to_hessian(&mut eval.hessian);
         }
         timings.assembly += t0.elapsed().as_secs_f64();
         let pattern = self.model.assembler.pattern();
@@ -298,33 +383,23 @@ impl NewtonProblem for System<'_> {
         let ok = ok?;
         timings.factorization += seconds;
         timings.factorizations += 1;
+        if let Some(reuse) = &mut self.reuse {
+            reuse.kept = ok.then(|| self.model.factor.generation());
+            reuse.last_norm = Some(g_norm);
+        }
         if !ok {
             timings.failed_factorization += seconds;
             timings.failed_factorizations += 1;
             return Ok(None);
         }
-        let t0 = Instant::now();
-        let mut d: Vec<f64> = g.iter().map(|v| -v).collect();
-        if self.is_mixed() {
-            let n = self.n_nodes();
-            let len = d.len();
-            d[len - n..]
-                .iter_mut()
-                .for_each(|v| *v /= self.model.pressure_weight);
-        }
-        self.model.factor.solve_in_place(&mut d);
-        timings.solve += t0.elapsed().as_secs_f64();
-        // No inertia test for the mixed formulation: the condensed curvature
-        // du^T A du + dp^T C dp cancels catastrophically when the pressure (and so K_geo(p)) is
-        // large.
-        let usable = if self.is_mixed() {
-            d.iter().all(|v| v.is_finite())
-        } else {
-            d.iter().zip(g).map(|(a, b)| a * b).sum::<f64>() < 0.0
-        };
+        let d = self.solve_with_factor(g, timings);
+        let usable = self.is_usable(&d, g);
         if !usable {
             timings.failed_factorization += seconds;
             timings.failed_factorizations += 1;
+            if let Some(reuse) = &mut self.reuse {
+                reuse.kept = None;
+            }
         }
         Ok(usable.then_some(d))
     }
@@ -350,6 +425,10 @@ impl NewtonProblem for System<'_> {
         } else {
             1.0
         }
+    }
+
+    fn reuses_factorizations(&self) -> bool {
+        self.reuse.is_some()
     }
 
     fn auxiliary(&mut self) -> Option<&mut dyn AuxiliaryIterates> {
