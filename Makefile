@@ -11,7 +11,7 @@ RUST_SOURCES := $(shell find crates -name '*.rs' -o -name Cargo.toml) Cargo.toml
 requirements = $(shell $(PYTHON) -c 'import shlex, sys, tomllib; p = tomllib.load(open("pyproject.toml", "rb"))["project"]; \
 	print(shlex.join(p["optional-dependencies"][sys.argv[1]] if sys.argv[1] else p["dependencies"]))' '$(1)')
 
-.PHONY: demo test test-rust test-python test-all bench build fmt clean docs test-viewer wheel test-wheel generate
+.PHONY: demo test test-rust test-python test-all bench build fmt clean docs test-viewer wheel test-wheel generate fuzz mutants
 
 $(STAMP): pyproject.toml
 	@command -v $(PYTHON) >/dev/null || { echo "error: $(PYTHON) not found (set PYTHON=...)"; exit 1; }
@@ -75,6 +75,31 @@ docs: $(DOCS_STAMP)
 test-viewer: build
 	$(PY) -m pip install --quiet $(call requirements,viewer) "playwright>=1.40"
 	SOROFEM_BROWSER_TEST=1 $(PY) -m pytest -q tests/test_viewer.py -rs
+
+# The mesh-reader fuzz target (tests/fuzz_mesh_readers.py): many random and damaged mesh files,
+# new ones on every run (Hypothesis's "fuzz" profile). Not part of `test`. FUZZ_EXAMPLES=N.
+FUZZ_EXAMPLES ?= 20000
+fuzz: build
+	$(PY) tests/fuzz_mesh_readers.py --examples $(FUZZ_EXAMPLES)
+
+# Mutation testing (docs/testing.md), not part of `test` or CI: every mutant rebuilds the core and
+# reruns its tests, so the whole run takes many hours on 2 cores. Narrow it with, e.g.,
+# `make mutants MUTANT_FILES=crates/sorofem-core/src/energy/loads.rs MUTANT_PYTHON=`. Results:
+# mutants.out/ (cargo-mutants: caught.txt, missed.txt, ...) and `.venv/bin/mutmut results`.
+MUTANT_FILES ?= crates/sorofem-core/src/material/*.rs crates/sorofem-core/src/energy/*.rs
+MUTANT_PYTHON ?= python/sorofem/cables.py
+MUTANT_PYTHON_TESTS ?= tests/test_cables.py tests/test_physics_cables.py
+# e.g. --copy-target=true to reuse an existing target/debug instead of building from scratch.
+CARGO_MUTANTS_ARGS ?=
+mutants: build
+	command -v cargo-mutants >/dev/null || cargo install --locked cargo-mutants
+	-cargo mutants -p sorofem-core $(foreach f,$(MUTANT_FILES),--file '$(f)') $(CARGO_MUTANTS_ARGS)
+	$(PY) -m pip install --quiet "mutmut>=2.5,<3"
+	-if [ -n "$(MUTANT_PYTHON)" ]; then \
+		$(VENV)/bin/mutmut run --paths-to-mutate '$(MUTANT_PYTHON)' --disable-mutation-types string,fstring \
+			--runner '$(abspath $(PY)) -m pytest -x -q -p no:cacheprovider $(MUTANT_PYTHON_TESTS)'; \
+		$(VENV)/bin/mutmut results; \
+	fi
 
 fmt:
 	cargo fmt --all

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from ci import missing_in_ci
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 
@@ -39,7 +40,7 @@ def shared_data() -> Path:
     """Path to the shared SolidFEM sample data (../shared/data/solidfem next to the repo)."""
     path = REPO_ROOT.parent / "shared" / "data" / "solidfem"
     if not path.is_dir():
-        pytest.skip(f"shared sample data not found at {path} (expected ../shared/data/solidfem beside the repo)")
+        missing_in_ci(f"shared sample data not found at {path} (expected ../shared/data/solidfem beside the repo)")
     return path
 
 
@@ -55,3 +56,8 @@ def box_scene(tmp_path: Path) -> Path:
     path = tmp_path / "scene.toml"
     path.write_text(BOX_SCENE, encoding="utf-8")
     return path
+
+
+# The Hypothesis profiles of the property suite ("ci": derandomised; "fuzz" for `make fuzz`),
+# loaded once for every test module.
+import tests.hostile  # noqa: E402,F401

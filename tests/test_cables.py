@@ -6,6 +6,7 @@ from __future__ import annotations
 import meshio
 import numpy as np
 import pytest
+from independent import material_point_positions
 
 import sorofem as sf
 from sorofem.cables import CablePlacement, segment_tensions
@@ -165,6 +166,10 @@ def test_continuation_to_half_length(beam):
     # the cable is internal, so the supports still carry just the weight.
     assert abs(gravity_only.displacement[tip, 1].mean()) < 1e-3  # (the tet split is not quite symmetric)
     assert final.displacement[tip, 1].mean() < -0.05
+    # The cable points are material points: where NumPy's interpolation in their tets puts them.
+    np.testing.assert_allclose(
+        final.cable_points[0], material_point_positions(beam.mesh, cable.points, final.positions), rtol=0, atol=1e-12
+    )
     chord = np.linalg.norm(final.cable_points[0][-1] - final.cable_points[0][0])
     assert chord < 0.8 * cable.length
     weight = 0.004 * 1080 * 9.81

@@ -12,6 +12,7 @@ from types import ModuleType
 
 import numpy as np
 import pytest
+from ci import missing_in_ci
 
 import sorofem as sf
 from sorofem.cli import main
@@ -48,7 +49,7 @@ def test_example_checks_pass(path, tmp_path):
     assert callable(getattr(module, "run", None)), f"{path.name} has no run(out_dir)"
     missing = [str(f) for f in getattr(module, "REQUIRED_FILES", ()) if not Path(f).is_file()]
     if missing:
-        pytest.skip(f"{path.name} needs data that is not here: {', '.join(missing)}")
+        missing_in_ci(f"{path.name} needs data that is not here: {', '.join(missing)}")
     for name in getattr(module, "REQUIRED_MODULES", ()):  # optional extras, e.g. the mesher
         pytest.importorskip(name, reason=f"{path.name} needs the optional module {name}")
     # Heavy examples take ``quick`` (fewer cases, same checks); their full runs are benchmarks.
@@ -74,8 +75,8 @@ def cantilever_summary(tmp_path_factory) -> dict:
 
 
 def test_cantilever_example_numbers(cantilever_summary):
-    """Both beams converge in a handful of Newton steps; the short one bends to about half
-    its length, the long one hangs down."""
+    """Both beams converge in a handful of Newton steps; the short one bends to a little less
+    than the elastica, the long one hangs down."""
     assert cantilever_summary["passed"] is True
     assert set(cantilever_summary["checks"]) == {
         "newton_quadratic", "force_balance", "moment_balance", "independent_reactions", "long_beam_hangs",
@@ -90,7 +91,8 @@ def test_cantilever_example_numbers(cantilever_summary):
         assert set(beam["timings"]) >= {"setup", "solve", "write"}
     # Weight of a 0.4 x 0.1 x 0.1 m beam at 1080 kg/m^3.
     np.testing.assert_allclose(short["weight"], [0, 0, -0.004 * 1080 * 9.81], rtol=1e-12)
-    assert 0.4 < short["tip_deflection_over_length"] < 0.7
+    # Below the elastica (the coarse mesh is stiff in bending), and not far below it.
+    assert 0.85 < short["tip_deflection"] / short["elastica_tip_deflection"] < 1.0
     assert long_["tip_deflection_over_length"] > 0.9
 
 

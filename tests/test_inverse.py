@@ -10,6 +10,7 @@ import pytest
 from fdcheck import check_gradient
 
 import sorofem as sf
+
 SIZE, CELLS = (0.4, 0.1, 0.1), (4, 2, 2)
 G = np.array([0.0, 0.0, -9.81])
 TIGHT = 1e-12  # Newton tolerance of the finite-difference solves
@@ -204,7 +205,10 @@ def test_scenarios_multistart_history_and_resume(tmp_path, synthetic):
     assert fit.params["shear_modulus"] == pytest.approx(truth.shear_modulus, rel=1e-6)
     assert len(fit.results) == 2
     lines = [json.loads(line) for line in path.read_text().splitlines()]
-    assert len(lines) == len(fit.history) and {e["start"] for e in lines} == {0, 1}
+    iterates = [e for e in lines if e["kind"] == "iteration"]
+    assert lines[0]["kind"] == "header" and len(lines[0]["starts"]) == 2
+    assert len(iterates) == len(fit.history) and {e["start"] for e in iterates} == {0, 1}
+    assert [e["start"] for e in lines if e["kind"] == "end"] == [0, 1]
     again = sf.estimate(build(), None, ["shear_modulus", "lame_lambda"], scenarios=scenarios,
                         history_path=path, resume=True)
     assert again.forward_solves <= 4  # starts at the optimum

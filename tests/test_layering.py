@@ -20,6 +20,7 @@ PACKAGE = Path(__file__).resolve().parent.parent / "python" / "sorofem"
 LAYERS: list[tuple[str, ...]] = [
     ("errors",),
     ("_extension", "_validate", "_version", "_deprecated", "_text", "progress"),
+    ("_files",),
     ("_formats",),
     ("mesh",),
     ("io",),

@@ -47,7 +47,9 @@ def test_starts_on_a_cluster_give_the_same_fit(tmp_path):
     assert [s["params"] for s in there.starts] == [s["params"] for s in here.starts]
     assert there.forward_solves == here.forward_solves
     # The history file has every iteration of every start, in start order.
-    lines = [json.loads(line) for line in (tmp_path / "there.jsonl").read_text().splitlines()]
+    records = [json.loads(line) for line in (tmp_path / "there.jsonl").read_text().splitlines()]
+    assert records[0]["kind"] == "header" and [e["start"] for e in records if e.get("kind") == "end"] == [0, 1, 2, 3]
+    lines = [e for e in records if e.get("kind", "iteration") == "iteration"]
     assert [(e["start"], e["iteration"], e["loss"]) for e in lines] == [
         (e["start"], e["iteration"], e["loss"]) for e in there.history]
     assert [e["start"] for e in lines] == sorted(e["start"] for e in lines) and {e["start"] for e in lines} == {0, 1, 2, 3}

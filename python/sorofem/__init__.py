@@ -22,7 +22,9 @@ from .dynamics import Trajectory, simulate
 from .errors import (
     ConvergenceError,
     InputError,
+    Interrupted,
     MeshError,
+    OutputError,
     ParameterError,
     SceneError,
     ShapeError,
@@ -84,6 +86,8 @@ __all__ = [
     "SceneError",
     "SolverError",
     "ConvergenceError",
+    "OutputError",
+    "Interrupted",
     "cables",
     "dynamics",
     "errors",

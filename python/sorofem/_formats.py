@@ -11,12 +11,16 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+import signal
+import threading
+import time
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, Iterator, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
+from ._files import atomic_path, check_path
 from ._validate import positive_scalar
 from .errors import InputError, MeshError
 
@@ -26,6 +30,8 @@ __all__ = [
     "same_file",
     "refuse_overwrite",
     "meshio_read",
+    "meshio_format",
+    "meshio_write",
     "read_volume",
     "write_volume",
     "read_surface",
@@ -62,19 +68,159 @@ def refuse_overwrite(path: Path, source: Path | None) -> None:
 def meshio_read(path: PathLike, what: str) -> Any:
     """``meshio.read(path)``, with any failure as a :class:`MeshError` naming the file and
     ``what`` it should hold ("mesh", "surface"). meshio prints the error of every reader it
-    tries (for .msh: ANSYS before Gmsh) to stdout, which would corrupt `sorofem info --json`;
-    that text goes into the error message instead."""
+    tries (for .msh: ANSYS before Gmsh) to stdout and stderr, which would corrupt `sorofem info
+    --json` and the one-line error of the command line; that text goes into the error message
+    instead. A read that does not end within :data:`READ_SECONDS` (plus a second per
+    :data:`READ_BYTES_PER_SECOND` bytes) is stopped: some of meshio's readers loop forever on a
+    truncated file."""
     import meshio
 
+    path = Path(path)
+    _check_headers(path)
     tried = io.StringIO()
+    seconds = READ_SECONDS + path.stat().st_size / READ_BYTES_PER_SECOND
     try:
-        with contextlib.redirect_stdout(tried):
-            return meshio.read(path)
-    except Exception as exc:  # meshio raises many types (ReadError, KeyError, ...)
+        with contextlib.redirect_stdout(tried), contextlib.redirect_stderr(tried), _deadline(seconds):
+            return meshio.read(path, file_format=_gmsh_format(path))
+    except _ReadTimeout:
+        raise MeshError(
+            f"{path}: meshio did not finish reading the {what} within {seconds:.0f} s; the file is damaged (some "
+            "of meshio's readers loop forever on a truncated file)"
+        ) from None
+    except (Exception, SystemExit) as exc:  # meshio raises many types (ReadError, KeyError, ...), even SystemExit
         detail = " ".join(tried.getvalue().split())
         raise MeshError(
             f"{path}: could not read the {what} with meshio: {exc}" + (f" ({detail})" if detail else "")
         ) from None
+
+
+#: A meshio read may take this long, s, plus one second per READ_BYTES_PER_SECOND bytes of the
+#: file, before it is stopped (main thread only: Python runs signal handlers there).
+READ_SECONDS = 10.0
+READ_BYTES_PER_SECOND = 2e6
+
+
+class _ReadTimeout(Exception):
+    pass
+
+
+@contextlib.contextmanager
+def _deadline(seconds: float) -> Iterator[None]:
+    """Raise :class:`_ReadTimeout` in the block after ``seconds`` (SIGALRM; the caller's own
+    alarm handler and timer are put back)."""
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "setitimer"):
+        yield
+        return
+
+    def expire(signum: int, frame: Any) -> None:
+        raise _ReadTimeout()
+
+    handler = signal.signal(signal.SIGALRM, expire)
+    started = time.monotonic()
+    previous, interval = signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, handler)
+        if previous > 0:
+            signal.setitimer(signal.ITIMER_REAL, max(previous - (time.monotonic() - started), 1e-3), interval)
+
+
+def _first_line(path: Path) -> bytes | None:
+    """The first line that is neither blank nor a ``#`` comment (None: there is none)."""
+    with path.open("rb") as fh:
+        for raw in fh:
+            line = raw.strip()
+            if line and not line.startswith(b"#"):
+                return line
+    return None
+
+
+def _check_headers(path: Path) -> None:
+    """Refuse the files on which meshio's readers never return: a TetGen pair with an empty
+    file, a PLY without ``end_header``."""
+    suffix = path.suffix.lower()
+    if suffix in (".node", ".ele"):
+        for file in (path.with_suffix(".node"), path.with_suffix(".ele")):
+            if file.is_file() and _first_line(file) is None:
+                raise MeshError(f"{path}: the TetGen file {file} has no header line")
+    if suffix == ".ply":
+        with path.open("rb") as fh:
+            head = fh.read(1 << 16)
+        if b"end_header" not in head:
+            raise MeshError(f"{path}: not a PLY file (no 'end_header' line)")
+
+
+def _gmsh_format(path: Path) -> str | None:
+    """``"gmsh"`` for a ``.msh`` that is Gmsh's (it starts with ``$MeshFormat``), so that meshio
+    does not try ANSYS's reader first; None otherwise (meshio picks by the suffix)."""
+    if path.suffix.lower() != ".msh":
+        return None
+    line = _first_line(path)
+    return "gmsh" if line is not None and line.startswith(b"$MeshFormat") else None
+
+
+#: meshio formats that write more than the named file (TetGen's .node + .ele, XDMF's .h5): they
+#: are written in place, not through a temporary file.
+_MULTI_FILE_FORMATS = ("tetgen", "xdmf")
+
+
+def meshio_format(path: Path) -> str:
+    """The meshio format that ``path``'s suffix selects.
+
+    Raises
+    ------
+    InputError
+        No suffix, or one meshio does not know (the message lists those it does).
+    """
+    import meshio
+
+    suffixes = [s.lower() for s in path.suffixes]
+    for k in range(len(suffixes)):
+        formats = meshio.extension_to_filetypes.get("".join(suffixes[k:]))
+        if formats:
+            return str(formats[0])
+    known = ", ".join(sorted(meshio.extension_to_filetypes))
+    raise InputError(f"{path}: cannot tell the file format from the suffix {path.suffix!r}; expected one of {known}")
+
+
+def meshio_write(path: Path, mesh: Any, *, run_id: int | None = None, **kwargs: Any) -> None:
+    """``meshio.write`` to ``path`` through a temporary file renamed over it
+    (:func:`sorofem._files.atomic_path`), for a format checked before anything is written;
+    meshio's own failures become an :class:`InputError` naming ``path``. ``run_id`` marks a
+    ``.vtu`` file with the field data ``sorofem_run_id`` (one Int64)."""
+    import meshio
+
+    file_format = kwargs.pop("file_format", None) or meshio_format(path)
+    try:
+        if file_format in _MULTI_FILE_FORMATS:
+            meshio.write(path, mesh, file_format=file_format, **kwargs)
+            return
+        with atomic_path(path) as temporary:
+            meshio.write(temporary, mesh, file_format=file_format, **kwargs)
+            if run_id is not None and file_format == "vtu":
+                _mark_vtu(temporary, run_id)
+    except OSError:
+        raise
+    except (meshio.ReadError, meshio.WriteError, KeyError, ValueError, TypeError, ModuleNotFoundError) as exc:
+        raise InputError(f"{path}: meshio cannot write this mesh as {file_format}: {exc}") from None
+
+
+def _mark_vtu(path: Path, run_id: int) -> None:
+    """Add the field data ``sorofem_run_id`` to a VTU file meshio wrote (its writer has none):
+    a ``FieldData`` element at the head of the ``UnstructuredGrid``, where VTK and meshio read it."""
+    data = path.read_bytes()
+    tag = b"<UnstructuredGrid>"
+    at = data.find(tag)
+    if at < 0:
+        raise InputError(f"{path}: not a VTU file as meshio writes it; cannot mark it with the run id")
+    at += len(tag)
+    field = (
+        '\n<FieldData>\n<DataArray type="Int64" Name="sorofem_run_id" NumberOfTuples="1" format="ascii">'
+        f"{int(run_id)}</DataArray>\n</FieldData>"
+    ).encode("ascii")
+    path.write_bytes(data[:at] + field + data[at:])
 
 
 def _is_volume(cells: Any) -> bool:
@@ -100,6 +246,7 @@ def read_volume(path: Path) -> tuple[NDArray[np.float64], NDArray[np.int64], NDA
     MeshError
         A malformed file, no tetrahedra, or volume cells other than linear tetrahedra.
     """
+    path = check_path(path, "path")
     if not path.is_file():
         raise FileNotFoundError(f"mesh file not found: {path}")
     if path.suffix.lower() == ".tet":
@@ -112,7 +259,14 @@ def read_volume(path: Path) -> tuple[NDArray[np.float64], NDArray[np.int64], NDA
     if path.suffix.lower() in SURFACE_FORMATS:
         raise MeshError(f"{path}: a {path.suffix.lower()} file holds a triangle surface, not tetrahedra; "
                         f"{_fill_hint(path)}")
-    return _read_meshio_volume(path)
+    try:
+        return _read_meshio_volume(path)
+    except MeshError:
+        raise
+    except (ValueError, TypeError, IndexError, KeyError, AttributeError, OverflowError, MemoryError) as exc:
+        # What meshio hands back from a damaged file can be anything: ragged or non-numeric
+        # arrays, cells without points, indices beyond int64.
+        raise MeshError(f"{path}: malformed mesh data ({type(exc).__name__}: {exc})") from None
 
 
 #: Suffixes of triangle-surface formats (no volume cells): a volume mesh is made from them by
@@ -150,7 +304,11 @@ def _read_tet(path: Path) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
             )
     if not tets:
         raise MeshError(f"{path}: no tetrahedra ('t i j k l' lines) found")
-    return np.array(points, dtype=np.float64).reshape(-1, 3), np.array(tets, dtype=np.int64)
+    try:
+        tet_array = np.array(tets, dtype=np.int64)
+    except OverflowError:
+        raise MeshError(f"{path}: a node index does not fit in a 64-bit integer") from None
+    return np.array(points, dtype=np.float64).reshape(-1, 3), tet_array
 
 
 def _read_meshio_volume(path: Path) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64] | None]:
@@ -203,16 +361,26 @@ def _cell_tags(m: Any, tetra: list[int], n_tets: int) -> NDArray[np.int64] | Non
 
 
 def write_volume(path: Path, points: NDArray[np.float64], tets: NDArray[np.int64]) -> None:
-    """Write tetrahedra as ``.tet`` (full float precision) or through meshio (by suffix)."""
+    """Write tetrahedra as ``.tet`` (full float precision) or through meshio (by suffix), through
+    a temporary file renamed over ``path``.
+
+    Raises
+    ------
+    InputError
+        A suffix no writer knows.
+    OutputError
+        The file cannot be written.
+    """
+    path = check_path(path, "path")
     if path.suffix.lower() == ".tet":
-        with path.open("w", encoding="utf-8") as fh:
+        with atomic_path(path) as temporary, temporary.open("w", encoding="utf-8") as fh:
             fh.write(f"# sorofem mesh: {len(points)} vertices, {len(tets)} tetrahedra\n")
             fh.writelines(f"v {x!r} {y!r} {z!r}\n" for x, y, z in points.tolist())
             fh.writelines(f"t {a} {b} {c} {d}\n" for a, b, c, d in tets.tolist())
         return
     import meshio
 
-    meshio.write_points_cells(path, points, [("tetra", tets)])
+    meshio_write(path, meshio.Mesh(points, [("tetra", tets)]))
 
 
 # ---------------------------------------------------------------------------
@@ -266,13 +434,20 @@ def read_surface(path: PathLike, scale: float = 1.0) -> Surface:
         ``scale`` is not a finite number > 0.
     """
     scale = positive_scalar(scale, "scale")
-    path = Path(path)
+    path = check_path(path, "path")
     if not path.is_file():
         raise FileNotFoundError(f"surface file not found: {path}")
-    if path.suffix.lower() == ".obj":
-        vertices, faces = _read_obj(path)
-    else:
-        vertices, faces = _read_meshio_surface(path)
+    try:
+        if path.suffix.lower() == ".obj":
+            vertices, faces = _read_obj(path)
+        else:
+            vertices, faces = _read_meshio_surface(path)
+    except MeshError:
+        raise
+    except (ValueError, TypeError, IndexError, KeyError, AttributeError, OverflowError, MemoryError) as exc:
+        raise MeshError(f"{path}: malformed surface data ({type(exc).__name__}: {exc})") from None
+    if not np.all(np.isfinite(vertices)):
+        raise MeshError(f"{path}: the surface has non-finite coordinates")
     if len(vertices) == 0:
         raise MeshError(f"{path}: the surface has no vertices")
     if faces.size and (faces.min() < 0 or faces.max() >= len(vertices)):

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
 from dataclasses import dataclass
 from typing import Any, Sequence
 
@@ -17,8 +18,24 @@ from numpy.typing import ArrayLike, NDArray
 from .errors import InputError, ParameterError, ShapeError
 
 __all__ = [
+    "LIMITS",
+    "Limit",
+    "MAX_NEWTON_ITERATIONS",
+    "MAX_LOAD_STEPS",
+    "MAX_CUTBACKS",
+    "MAX_TIME_STEPS",
+    "MAX_CABLE_DIVISIONS",
+    "MAX_STARTS",
+    "MAX_EVALUATIONS",
+    "MAX_INDEX",
+    "MESH_SIZE",
+    "MAX_MAGNITUDE",
+    "machine_memory",
+    "check_memory",
+    "count",
     "Range",
     "describe",
+    "shown",
     "as_float_array",
     "as_finite",
     "as_index_array",
@@ -32,11 +49,142 @@ __all__ = [
 ]
 
 
+@dataclass(frozen=True)
+class Limit:
+    """A documented bound on an input: ``name`` (the argument or scene key it bounds), its
+    ``value`` and why it is there (``why``)."""
+
+    name: str
+    value: float
+    why: str
+
+
+#: Newton iterations per load step (``max_iterations``, ``[solver] max_iterations``).
+MAX_NEWTON_ITERATIONS = 10_000
+#: Load increments of a static solve (``load_steps``).
+MAX_LOAD_STEPS = 10_000
+#: Halvings of a failed load step (``[solver] max_cutbacks``): 2^-60 of a step is below
+#: float64's resolution of the load factor.
+MAX_CUTBACKS = 60
+#: Time steps of one simulation (``steps``, ``[dynamics] steps``); also bounds ``save_every``.
+MAX_TIME_STEPS = 1_000_000
+#: Segments of a straight cable (``Cable.line(divisions=...)``, ``[[cable]] divisions``).
+MAX_CABLE_DIVISIONS = 100_000
+#: Extra starts of an estimate (``starts``, ``[estimate] starts``).
+MAX_STARTS = 1_000
+#: Objective evaluations per start of an estimate or a control (``max_evaluations``).
+MAX_EVALUATIONS = 100_000
+#: Any other integer of a scene file (node, element and cable indices, box cells per axis).
+MAX_INDEX = 2**31 - 1
+#: Length of a mesh's bounding-box diagonal, m: ``(smallest, largest)``.
+MESH_SIZE = (1e-9, 1e9)
+#: Largest load (N), stiffness times mesh size (N) and simulated time (s): the solver sums
+#: squares of such values in its residual norm, which must stay below float64's 1.8e308.
+MAX_MAGNITUDE = 1e150
+
+#: Every documented limit, by the name it bounds (the docs page "What sorofem guarantees"
+#: lists them from here).
+LIMITS: dict[str, Limit] = {
+    limit.name: limit
+    for limit in (
+        Limit("max_iterations", MAX_NEWTON_ITERATIONS, "Newton iterations per load step; more never converge "
+              "where fewer did not"),
+        Limit("load_steps", MAX_LOAD_STEPS, "load increments of a static solve (the solver cuts steps back itself)"),
+        Limit("max_cutbacks", MAX_CUTBACKS, "halvings of a failed load step: a 2^-60 step is below the resolution "
+              "of the load factor"),
+        Limit("steps", MAX_TIME_STEPS, "time steps of one simulation (save_every is bounded by it too): a longer "
+              "run is several runs, each continuing the last (initial=trajectory)"),
+        Limit("divisions", MAX_CABLE_DIVISIONS, "segments of a straight cable"),
+        Limit("starts", MAX_STARTS, "extra starts of an estimate"),
+        Limit("max_evaluations", MAX_EVALUATIONS, "objective evaluations per start of an estimate or control"),
+        Limit("index", MAX_INDEX, "any other integer in a scene file: node, element and cable indices, box cells "
+              "per axis"),
+        Limit("mesh size", MESH_SIZE[1], f"bounding-box diagonal of a mesh, m, from {MESH_SIZE[0]:g} to "
+              f"{MESH_SIZE[1]:g}: beyond, volumes and stiffnesses leave the range of float64"),
+        Limit("magnitude", MAX_MAGNITUDE, "total load (N: forces, weight), stiffness times mesh size (N: "
+              "moduli, cable stiffness), stiffness times prescribed displacement (N) and simulated time dt * steps "
+              "(s): beyond, squares in the residual norm overflow float64"),
+        Limit("memory", 1.0, "a model whose estimated memory exceeds the machine's (physical memory, or the "
+              "cgroup's limit) is refused before anything is allocated"),
+    )
+}
+
+
+def machine_memory() -> int:
+    """Bytes of memory this process may use: the physical memory, or the cgroup's limit when
+    lower (a container)."""
+    try:
+        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        total = 2**62
+    for limit_file in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            with open(limit_file, encoding="ascii") as fh:
+                text = fh.read().strip()
+        except OSError:
+            continue
+        if text.isdigit():
+            total = min(total, int(text))
+    return int(total)
+
+
+def _gib(n_bytes: float) -> str:
+    return f"{n_bytes / 2**30:.3g} GiB"
+
+
+def check_memory(n_bytes: float, what: str, name: str) -> None:
+    """A :class:`ParameterError` naming ``name`` when ``what`` needs more than
+    :func:`machine_memory` (``n_bytes`` is an estimate, a lower bound)."""
+    available = machine_memory()
+    if n_bytes > available:
+        raise ParameterError(
+            f"{name}: {what} needs at least {_gib(n_bytes)} of memory, more than this machine has "
+            f"({_gib(available)}); use a coarser mesh",
+            name,
+        )
+
+
+def count(value: Any, name: str, minimum: int, maximum: int) -> int:
+    """An integer in ``[minimum, maximum]`` (a :class:`ParameterError` naming ``name`` and the
+    bound otherwise); NumPy integers too, never a bool or a float."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
+        raise ParameterError(f"{name}: expected an integer from {minimum} to {maximum}, got {describe(value)}", name)
+    value = int(value)
+    if not minimum <= value <= maximum:
+        limit = " (the documented limit, see sorofem's guarantees)" if value > maximum else ""
+        raise ParameterError(f"{name}: expected an integer from {minimum} to {maximum}{limit}, got {shown(value)}", name)
+    return value
+
+
 def describe(value: Any) -> str:
     """A value for an error message: ``an array of shape (3,) and dtype int64``, ``str 'abc'``."""
     if isinstance(value, np.ndarray):
         return f"an array of shape {value.shape} and dtype {value.dtype}"
-    return f"{type(value).__name__} {value!r}"
+    return f"{type(value).__name__} {shown(value)}"
+
+
+def shown(value: Any, width: int = 80) -> str:
+    """``repr(value)`` cut to ``width`` characters; an integer too long to print (Python refuses
+    more than 4300 digits) by its size."""
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 256:
+        return f"<an integer of {value.bit_length()} bits>"
+    try:
+        text = repr(value)
+    except Exception:  # noqa: BLE001 - a user object whose repr fails
+        text = f"<{type(value).__name__} object>"
+    return text if len(text) <= width else text[: width - 3] + "..."
+
+
+def _array(value: Any, name: str, what: str) -> NDArray[Any]:
+    """``np.asarray(value)``; ragged nesting, integers beyond 64 bits and other values NumPy
+    cannot hold as a regular array become a :class:`ShapeError` naming ``name``."""
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError, OverflowError):
+        raise ShapeError(f"{name}: expected {what}, got {describe(value)}") from None
+    if arr.dtype == object:
+        raise ShapeError(f"{name}: expected {what}, got {describe(value)}")
+    return arr
 
 
 def as_float_array(value: ArrayLike, name: str, shape: tuple[int | None, ...]) -> NDArray[np.float64]:
@@ -49,7 +197,7 @@ def as_float_array(value: ArrayLike, name: str, shape: tuple[int | None, ...]) -
     """
     try:
         arr = np.asarray(value)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:
         raise ShapeError(f"{name}: expected a numeric array, got {describe(value)} ({exc})") from None
     if arr.dtype == object or not (
         np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)
@@ -73,7 +221,7 @@ def as_finite(value: ArrayLike, name: str, shape: tuple[int | None, ...]) -> NDA
 def as_index_array(value: ArrayLike, name: str, n_nodes: int) -> NDArray[np.int64]:
     """Node indices as a 1-D int64 array in ``[0, n_nodes)``; a boolean mask of length
     ``n_nodes`` is accepted too."""
-    arr = np.asarray(value)
+    arr = _array(value, name, "node indices")
     if arr.dtype == np.bool_:
         if arr.shape != (n_nodes,):
             raise ShapeError(f"{name}: a boolean mask must have shape ({n_nodes},), got shape {arr.shape}")
@@ -98,7 +246,7 @@ def as_index_array(value: ArrayLike, name: str, n_nodes: int) -> NDArray[np.int6
 
 def vector_per_node(value: ArrayLike, name: str, k: int) -> NDArray[np.float64]:
     """A ``(3,)`` vector broadcast to ``k`` nodes, or a ``(k, 3)`` array; finite."""
-    arr = np.asarray(value)
+    arr = _array(value, name, "a (3,) vector or a (k, 3) array")
     if arr.ndim == 1:
         vec = as_finite(arr, name, (3,))
         return np.broadcast_to(vec, (k, 3)).copy()
@@ -119,8 +267,11 @@ def positive_scalar(value: Any, name: str) -> float:
     return value
 
 
-def positive_int(value: Any, name: str) -> int:
-    """An integer >= 1 (a :class:`ParameterError` naming ``name`` otherwise)."""
+def positive_int(value: Any, name: str, maximum: int | None = None) -> int:
+    """An integer >= 1, and <= ``maximum`` when given (a :class:`ParameterError` naming
+    ``name`` otherwise)."""
+    if maximum is not None:
+        return count(value, name, 1, maximum)
     if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
         raise ParameterError(f"{name}: expected an integer >= 1, got {describe(value)}", name)
     return int(value)

@@ -19,13 +19,19 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ._extension import core
-from ._validate import as_index_array, choice, describe, positive_scalar, vector_per_node
+from ._validate import as_index_array, check_memory, choice, describe, positive_scalar, vector_per_node
 from .cables import Cable, CablePlacement, cable_index, check_actuation
 from .errors import InputError
 from .materials import Material
 from .mesh import Mesh
 
 __all__ = ["Body", "FORMULATIONS", "VOLUMETRIC_MEASURES", "PRESSURE_MASSES"]
+
+#: A lower bound of the bytes a model holds per node (sparse Hessian, its factorisation,
+#: per-element data; measured 13-31 kB for the standard and 24 kB and up for the mixed
+#: formulation on box meshes of 2.7k to 19k nodes, growing with the fill-in): a body whose
+#: model would need more than the machine's memory is refused before it is built.
+MODEL_BYTES_PER_NODE = {"standard": 10_000, "mixed": 20_000}
 
 #: Formulations the solver accepts: displacement only, or displacement + nodal pressure.
 FORMULATIONS: tuple[str, ...] = ("standard", "mixed")
@@ -378,6 +384,9 @@ class Body:
     def _built_model(self) -> Any:
         key = (self._fixed.tobytes(), len(self._cables), self._formulation, tuple(self.formulation_options.items()))
         if self._model is None or self._model_key != key:
+            per_node = MODEL_BYTES_PER_NODE.get(self._formulation, max(MODEL_BYTES_PER_NODE.values()))
+            check_memory(per_node * self._mesh.n_nodes,
+                         f"the {self._formulation} model of a mesh of {self._mesh.n_nodes} nodes", "mesh")
             cables = [c.to_core(alpha) | {"stiffness": k}
                       for c, alpha, k in zip(self._cables, self._actuations, self._stiffnesses)]
             self._model = core().Model(

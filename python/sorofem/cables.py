@@ -43,7 +43,9 @@ from typing import Any, NamedTuple, Protocol, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._validate import describe, real
+from ._files import check_path
+from ._formats import meshio_write
+from ._validate import MAX_CABLE_DIVISIONS, count, describe, real
 from .errors import InputError, ParameterError, ShapeError
 
 __all__ = ["Cable", "CablePlacement", "OUTSIDE_MODES", "segment_tensions", "write_cables"]
@@ -189,7 +191,7 @@ class Cable:
         length
             Total length, m, > 0.
         divisions
-            Number of segments, >= 1.
+            Number of segments, from 1 to 100,000 (a documented limit).
         stiffness, actuation, **options
             As for :class:`Cable`.
 
@@ -210,9 +212,8 @@ class Cable:
         if d.shape != (3,) or not np.all(np.isfinite(d)) or not np.linalg.norm(d) > 0:
             raise ParameterError(f"direction: expected a finite non-zero vector (3,), got {describe(direction)}", "direction")
         length = real(length, "length", minimum=0.0, strict=True)
-        if isinstance(divisions, bool) or not isinstance(divisions, numbers.Integral) or divisions < 1:
-            raise ParameterError(f"divisions: expected an integer >= 1, got {describe(divisions)}", "divisions")
-        t = np.linspace(0.0, length, int(divisions) + 1)
+        divisions = count(divisions, "divisions", 1, MAX_CABLE_DIVISIONS)
+        t = np.linspace(0.0, length, divisions + 1)
         points = p0 + t[:, None] * (d / np.linalg.norm(d))
         return cls(points, stiffness, actuation, **options)
 
@@ -371,12 +372,13 @@ def attached_rest_lengths(body: Any, cable: "Cable | int") -> NDArray[np.float64
 # Output
 
 
-def write_cables(path: str | os.PathLike[str], result: Any) -> None:
+def write_cables(path: str | os.PathLike[str], result: Any, *, run_id: int | None = None) -> None:
     """Write a result's cables (a :class:`sorofem.StaticResult`'s ``cable_points`` and
     ``cable_tensions``) as polylines (``.vtu``/``.vtk``, through meshio) for ParaView.
 
     Point data: ``cable`` (index). Cell data (one line cell per segment): ``tension`` (N) and
-    ``cable``.
+    ``cable``. Written to a temporary name and renamed over ``path``; ``run_id`` marks a
+    ``.vtu`` (field data ``sorofem_run_id``).
 
     Raises
     ------
@@ -395,12 +397,13 @@ def write_cables(path: str | os.PathLike[str], result: Any) -> None:
     cable_of_point = np.repeat(np.arange(len(result.cable_points)), np.diff(offsets))
     cable_of_line = np.repeat(np.arange(len(result.cable_points)), np.diff(offsets) - 1)
     tension = np.concatenate(result.cable_tensions)
-    meshio.write(
-        Path(path),
+    meshio_write(
+        check_path(path, "path"),
         meshio.Mesh(
             points,
             [("line", lines)],
             point_data={"cable": cable_of_point.astype(np.float64)},
             cell_data={"tension": [tension], "cable": [cable_of_line.astype(np.float64)]},
         ),
+        run_id=run_id,
     )

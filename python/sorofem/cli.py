@@ -3,7 +3,7 @@
 Usage::
 
     sorofem run SCENE.toml [--out DIR] [--quiet] [--json]
-    sorofem estimate SCENE.toml [--out DIR] [--quiet] [--json]
+    sorofem estimate SCENE.toml [--out DIR] [--quiet] [--json] [--history FILE] [--resume]
     sorofem control SCENE.toml [--out DIR] [--quiet] [--json]
     sorofem info MESH [--scale S] [--json]
     sorofem convert IN OUT [--scale S] [--quiet]
@@ -14,9 +14,12 @@ Usage::
 
 ``run`` writes ``DIR/result.vtu``, ``DIR/summary.json``, ``DIR/shape.png`` and
 ``DIR/convergence.png`` (and ``DIR/deformed.vtu`` with ``[output] deformed = true``). It only
-ever writes those names and never deletes anything. ``result.vtu`` holds the **rest** mesh with
-the point data ``displacement`` (the finite-element convention: ParaView's Warp By Vector on it
-shows the deformed body); ``deformed.vtu`` the same data on the deformed mesh.
+ever writes those names, each through a temporary file renamed over it, and marks them with a
+run id (:class:`sorofem.io.RunFolder`: ``summary.json`` says ``"complete": false`` until
+everything is written; an earlier run's frames in ``trajectory/`` are removed, its other files
+reported as ``stale_outputs``). ``result.vtu`` holds the **rest** mesh with the point data
+``displacement`` (the finite-element convention: ParaView's Warp By Vector on it shows the
+deformed body); ``deformed.vtu`` the same data on the deformed mesh.
 ``summary.json`` records, besides the solver report, the volume bookkeeping
 ``volume_change`` ((V_deformed - V_rest) / V_rest) and ``mean_log_j`` (sum V_e ln J_e / V),
 and for ``kind = "mixed"`` the pressure range ``min_pressure``/``max_pressure`` (Pa); the
@@ -59,8 +62,12 @@ line, for VS Code's Even Better TOML or taplo).
 
 Exit codes: 0 success; 2 bad input (scene, mesh or arguments: one ``error: ...`` line on
 stderr); 3 the solver failed (``summary.json`` is still written, unless switched off, with
-``"converged": false`` and the solver report); 1 an unexpected error (a bug: please report
-it with the traceback).
+``"converged": false`` and the solver report); 4 an output could not be written (disk full,
+file-size limit, permission: the message names the file); 130 and 143 stopped by SIGINT
+(Ctrl-C) or SIGTERM (the outputs written are whole, ``summary.json`` says
+``"complete": false``); 1 an unexpected error (a bug: please report it with the traceback).
+``estimate --history FILE`` (default ``DIR/history.jsonl``) records every iterate as it goes,
+and ``--resume`` goes on with an interrupted run.
 
 Examples
 --------
@@ -72,12 +79,13 @@ Examples
 from __future__ import annotations
 
 import argparse
-import json
-import math
+import signal
 import sys
+import threading
 import traceback
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Iterator, Sequence
 
 import numpy as np
 
@@ -85,9 +93,10 @@ from ._text import plural
 from ._version import __version__
 from .cables import placement_counts, write_cables
 from .convert import run_command as convert_command
-from .errors import ConvergenceError, InputError, SolverError
+from .dynamics import PvdWriter
+from .errors import ConvergenceError, InputError, Interrupted, OutputError, SolverError
 from .inverse import DEFAULT_TOLERANCE, control, estimate
-from .io import read_mesh, write_result
+from .io import RunFolder, atomic_path, json_text, read_mesh, write_result, write_text
 from .plot import plot_convergence, plot_fit, plot_profile, plot_rest_and_deformed, plot_trajectory
 from .progress import default as progress_default
 from .scene import Scene, schema_text
@@ -97,12 +106,18 @@ from .viewer import serve as view_command
 
 __all__ = ["main"]
 
-EXIT_OK, EXIT_UNEXPECTED, EXIT_INPUT, EXIT_SOLVER = 0, 1, 2, 3
+EXIT_OK, EXIT_UNEXPECTED, EXIT_INPUT, EXIT_SOLVER, EXIT_OUTPUT = 0, 1, 2, 3, 4
+#: 128 + the signal's number, as shells report a process a signal ended.
+EXIT_SIGINT, EXIT_SIGTERM = 128 + signal.SIGINT, 128 + signal.SIGTERM
 OUTPUT_NAMES = ("result.vtu", "summary.json", "shape.png", "convergence.png")
 #: Written besides OUTPUT_NAMES when the scene has cables.
 CABLE_OUTPUT_NAMES = ("cables.vtu",)
 #: Written instead of OUTPUT_NAMES for a scene with [dynamics] (trajectory/ holds the frames).
 DYNAMICS_OUTPUT_NAMES = ("trajectory.pvd", "trajectory", "summary.json", "trajectory.png")
+#: Every name `run` may write in its folder (sorofem.io.RunFolder: the stale ones are reported).
+RUN_OWNED = tuple(dict.fromkeys(OUTPUT_NAMES + CABLE_OUTPUT_NAMES + ("deformed.vtu",) + DYNAMICS_OUTPUT_NAMES))
+#: What `estimate` and `control` write (history.jsonl: estimate's, unless --history names another file).
+INVERSE_OUTPUT_NAMES = ("summary.json", "result.vtu", "fit.png", "profile.png", "history.jsonl")
 #: Radius ratio below which a tet counts as bad in `sorofem info` (1 = regular tet).
 BAD_QUALITY = 0.1
 
@@ -134,10 +149,11 @@ exit codes:
   2    bad input: scene, mesh or arguments (one 'error: ...' line on stderr)
   3    the solver failed, an estimate did not converge or a control target is not reachable
        (summary.json is still written)
+  4    an output could not be written (disk full, file-size limit, permission)
   1    unexpected error (a bug: please report it with the traceback)
-  130  interrupted (Ctrl-C)
+  130  interrupted by Ctrl-C (SIGINT), 143 by SIGTERM: summary.json says "complete": false
 
-documentation: docs/cli.md and docs/scene.md, or 'sorofem COMMAND --help'"""
+documentation: docs/cli.md, docs/scene.md and docs/guarantees.md, or 'sorofem COMMAND --help'"""
 
 #: The epilog of ``sorofem convert --help``: what each output suffix writes.
 CONVERT_EPILOG = """\
@@ -178,6 +194,11 @@ def _build_parser() -> argparse.ArgumentParser:
                          help="output folder (created); overrides the scene's [output] directory")
         inv.add_argument("--quiet", action="store_true", help="print nothing on success")
         inv.add_argument("--json", action="store_true", help="print summary.json to stdout instead of text")
+        if name == "estimate":
+            inv.add_argument("--history", type=Path, metavar="FILE",
+                             help="write each iterate to FILE as it goes (default DIR/history.jsonl)")
+            inv.add_argument("--resume", action="store_true",
+                             help="go on with the interrupted run recorded in the history file")
 
     info = sub.add_parser("info", help="print statistics of a mesh file")
     info.add_argument("mesh", type=Path, help="mesh file (.tet or any format meshio reads)")
@@ -211,10 +232,14 @@ def _build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code (see the module docstring)."""
     try:
-        args = _build_parser().parse_args(argv)
-        # --quiet silences the progress line too; otherwise it shows only on a terminal.
-        with progress_default(False if getattr(args, "quiet", False) else None):
-            return _dispatch(args)
+        with _sigterm_interrupts():
+            args = _build_parser().parse_args(argv)
+            # --quiet silences the progress line too; otherwise it shows only on a terminal.
+            with progress_default(False if getattr(args, "quiet", False) else None):
+                return _dispatch(args)
+    except OutputError as exc:
+        print(f"error: {_one_line(exc)}", file=sys.stderr)
+        return EXIT_OUTPUT
     except (_UsageError, InputError, FileNotFoundError, NotADirectoryError, IsADirectoryError,
             PermissionError) as exc:
         print(f"error: {_one_line(exc)}", file=sys.stderr)
@@ -224,9 +249,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_SOLVER
     except SystemExit as exc:  # --help and --version exit through argparse
         return exc.code if isinstance(exc.code, int) else EXIT_OK
-    except KeyboardInterrupt:
-        print("error: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        name = getattr(exc, "signal", "SIGINT")
+        print(f"error: interrupted by {name}", file=sys.stderr)
+        return EXIT_SIGTERM if name == "SIGTERM" else EXIT_SIGINT
     except Exception:  # noqa: BLE001 - last resort: report a bug with its traceback
         traceback.print_exc()
         print("error: unexpected internal error (a bug; please report it with the traceback above)",
@@ -258,19 +284,23 @@ def _one_line(exc: BaseException) -> str:
     return " ".join(text.split())
 
 
-def _jsonable(value: Any) -> Any:
-    """JSON without NaN/Infinity (not valid JSON): they become null."""
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, (np.floating, float)):
-        return float(value) if math.isfinite(value) else None
-    if isinstance(value, np.integer):
-        return int(value)
-    return value
+@contextmanager
+def _sigterm_interrupts() -> Iterator[None]:
+    """Within the block SIGTERM stops the run as Ctrl-C does (an :class:`Interrupted` with
+    ``signal="SIGTERM"``), so that it leaves marked, consistent outputs; only in the main
+    thread, where Python runs signal handlers."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def stop(signum: int, frame: Any) -> None:
+        raise Interrupted("terminated", signal="SIGTERM")
+
+    previous = signal.signal(signal.SIGTERM, stop)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 # ---------------------------------------------------------------------------
@@ -320,14 +350,6 @@ def _refuse_inputs(outputs: dict[str, Path], scene: Any, label: str) -> None:
                 raise InputError(f"{label}: writing {name} would overwrite the input file {source}")
 
 
-def _write_summary(outputs: dict[str, Path], summary: dict[str, Any]) -> str:
-    """The summary as JSON text, written to summary.json unless ``[output] summary = false``."""
-    text = json.dumps(_jsonable(summary), indent=2) + "\n"
-    if "summary.json" in outputs:
-        outputs["summary.json"].write_text(text, encoding="utf-8")
-    return text
-
-
 def _report_in(outputs: dict[str, Path]) -> str:
     return f" (report in {outputs['summary.json']})" if "summary.json" in outputs else ""
 
@@ -343,8 +365,7 @@ def _run(args: argparse.Namespace) -> int:
     out, label = _output_folder(args, scene)
     outputs = {name: out / name for name in _selected_outputs(scene)}
     _refuse_inputs(outputs, scene, label)
-    if outputs:
-        out.mkdir(parents=True, exist_ok=True)
+    run = RunFolder(out, outputs, RUN_OWNED, frames="trajectory")
 
     base = {
         "scene": str(scene.path),
@@ -356,8 +377,20 @@ def _run(args: argparse.Namespace) -> int:
         "gravity": scene.gravity.tolist(),
         "solver_options": scene.solve_options.to_dict(),
     }
-    if scene.dynamics is not None:
-        return _run_dynamics(args, scene, outputs, base, out)
+    try:
+        run.start(base)
+        _warn_stale(run)
+        if scene.dynamics is not None:
+            return _run_dynamics(args, scene, run, base)
+        return _run_static(args, scene, run, base)
+    except (KeyboardInterrupt, OutputError) as exc:
+        run.stopped(_stop_status(exc))
+        raise
+
+
+def _run_static(args: argparse.Namespace, scene: Any, run: RunFolder, base: dict[str, Any]) -> int:
+    """``run`` for a static scene: result.vtu, cables.vtu, shape.png, convergence.png, summary.json."""
+    outputs = run.outputs
     try:
         result = scene.solve()
     except SolverError as exc:
@@ -374,9 +407,10 @@ def _run(args: argparse.Namespace) -> int:
             "error": str(exc),
             "report": report.to_dict(),
         }
-        text = _write_summary(outputs, summary)
         if report.residual_history and "convergence.png" in outputs:
-            plot_convergence(report, outputs["convergence.png"], tolerance=scene.solve_options.tolerance)
+            with atomic_path(outputs["convergence.png"]) as png:
+                plot_convergence(report, png, tolerance=scene.solve_options.tolerance)
+        text = run.write_summary(summary, complete=True, status="failed")
         if args.json:
             sys.stdout.write(text)
         what = "did not converge" if isinstance(exc, ConvergenceError) else "failed"
@@ -384,21 +418,26 @@ def _run(args: argparse.Namespace) -> int:
         return EXIT_SOLVER
 
     summary = {**base, **result.to_dict()}
-    if "result.vtu" in outputs:
-        write_result(outputs["result.vtu"], result)
-    if "deformed.vtu" in outputs:
-        write_result(outputs["deformed.vtu"], result, points="deformed")
-    if "cables.vtu" in outputs:
-        write_cables(outputs["cables.vtu"], result)
-    text = _write_summary(outputs, summary)
-    if "shape.png" in outputs:
-        color_by = scene.output["color_by"]
-        field = "" if color_by == "displacement" else f", coloured by {color_by}"
-        plot_rest_and_deformed(result, outputs["shape.png"], color_by=color_by,
-                               title=f"{scene.path.name}: max |u| = {result.max_displacement:.3g} m{field}")
-    if "convergence.png" in outputs:
-        plot_convergence(result.report, outputs["convergence.png"], tolerance=scene.solve_options.tolerance)
-
+    try:
+        if "result.vtu" in outputs:
+            write_result(outputs["result.vtu"], result, run_id=run.run_id)
+        if "deformed.vtu" in outputs:
+            write_result(outputs["deformed.vtu"], result, points="deformed", run_id=run.run_id)
+        if "cables.vtu" in outputs:
+            write_cables(outputs["cables.vtu"], result, run_id=run.run_id)
+        if "shape.png" in outputs:
+            color_by = scene.output["color_by"]
+            field = "" if color_by == "displacement" else f", coloured by {color_by}"
+            with atomic_path(outputs["shape.png"]) as png:
+                plot_rest_and_deformed(result, png, color_by=color_by,
+                                       title=f"{scene.path.name}: max |u| = {result.max_displacement:.3g} m{field}")
+        if "convergence.png" in outputs:
+            with atomic_path(outputs["convergence.png"]) as png:
+                plot_convergence(result.report, png, tolerance=scene.solve_options.tolerance)
+    except (KeyboardInterrupt, OutputError) as exc:
+        _unfinished(run, summary, exc)
+        raise
+    text = run.write_summary(summary, complete=True, status="complete")
     if args.json:
         sys.stdout.write(text)
     elif not args.quiet:
@@ -413,14 +452,32 @@ def _run(args: argparse.Namespace) -> int:
             print(f"pressure {result.pressure.min():.4g} .. {result.pressure.max():.4g} Pa")
         for c, tension in enumerate(result.cable_tensions):
             print(f"cable {c}: alpha {result.actuations[c]:g}, tension {tension.min():.4g} .. {tension.max():.4g} N")
-        print(_wrote(outputs, out))
+        print(_wrote(outputs, run.folder))
     return EXIT_OK
 
 
-def _run_dynamics(
-    args: argparse.Namespace, scene: Any, outputs: dict[str, Path], base: dict[str, Any], out: Path
-) -> int:
-    """``run`` for a scene with ``[dynamics]``: trajectory.pvd + frames, summary.json, trajectory.png."""
+def _stop_status(exc: BaseException) -> str:
+    if isinstance(exc, OutputError):
+        return f"failed: {exc}"
+    return f"interrupted by {getattr(exc, 'signal', 'SIGINT')}"
+
+
+def _unfinished(run: RunFolder, summary: dict[str, Any], exc: BaseException) -> None:
+    """Mark the summary of a run stopped while writing its outputs, with what it has."""
+    run.summary = summary
+    run.stopped(_stop_status(exc))
+
+
+def _warn_stale(run: RunFolder) -> None:
+    if run.stale:
+        print(f"warning: {', '.join(run.stale)} in {run.folder} are from an earlier run (this one does not write "
+              "them); see stale_outputs in summary.json", file=sys.stderr)
+
+
+def _run_dynamics(args: argparse.Namespace, scene: Any, run: RunFolder, base: dict[str, Any]) -> int:
+    """``run`` for a scene with ``[dynamics]``: trajectory.pvd + frames (written while the
+    integration goes), summary.json, trajectory.png."""
+    outputs = run.outputs
     base = {**base, "dynamics": scene.to_dict()["dynamics"]}
     if scene.cables:
         base["cables"] = [
@@ -428,24 +485,39 @@ def _run_dynamics(
              "placement_counts": placement_counts(placements)}
             for c, placements in zip(scene.cables, scene.body.cable_placements())
         ]
+    writer = PvdWriter(scene.body, run.folder, "trajectory", run_id=run.run_id) if "trajectory.pvd" in outputs else None
     try:
-        trajectory = scene.simulate()
+        trajectory = scene.simulate(on_frames=None if writer is None else writer.add)
     except SolverError as exc:
-        summary = {**base, "converged": False, "error": str(exc)}
-        text = _write_summary(outputs, summary)
+        text = run.write_summary({**base, "converged": False, "error": str(exc)}, complete=True, status="failed")
+        if writer is not None:
+            writer.close()
         if args.json:
             sys.stdout.write(text)
         print(f"error: solver failed: {_one_line(exc)}{_report_in(outputs)}", file=sys.stderr)
         return EXIT_SOLVER
-    if "trajectory.pvd" in outputs:
-        trajectory.write_pvd(outputs["trajectory.pvd"].parent, "trajectory")
+    except KeyboardInterrupt as exc:
+        partial = getattr(exc, "result", None)
+        summary = {**base, "converged": None, **({} if partial is None else partial.to_dict())}
+        if writer is not None:
+            writer.close()
+            summary["frames_written"] = writer.n_frames
+        _unfinished(run, summary, exc)
+        raise
     summary = {**base, "converged": True, **trajectory.to_dict()}
     for entry, tension, points in zip(summary.get("cables", []), trajectory.cable_tensions(-1), trajectory.cable_points[-1]):
         entry["final_tensions"] = tension.tolist()
         entry["final_points"] = points.tolist()
-    text = _write_summary(outputs, summary)
-    if "trajectory.png" in outputs:
-        plot_trajectory(trajectory, outputs["trajectory.png"])
+    try:
+        if writer is not None:
+            writer.close()
+        if "trajectory.png" in outputs:
+            with atomic_path(outputs["trajectory.png"]) as png:
+                plot_trajectory(trajectory, png)
+    except (KeyboardInterrupt, OutputError) as exc:
+        _unfinished(run, summary, exc)
+        raise
+    text = run.write_summary(summary, complete=True, status="complete")
     if args.json:
         sys.stdout.write(text)
     elif not args.quiet:
@@ -458,7 +530,7 @@ def _run_dynamics(
         print(f"final kinetic energy {summary['final_kinetic_energy']:.3e} J (max {summary['max_kinetic_energy']:.3e} J), "
               f"max displacement {summary['max_displacement']:.6g} m")
         frames = f" ({trajectory.n_frames} frames)" if "trajectory.pvd" in outputs else ""
-        print(_wrote(outputs, out, frames))
+        print(_wrote(outputs, run.folder, frames))
     return EXIT_OK
 
 
@@ -478,7 +550,15 @@ def _inverse(args: argparse.Namespace) -> int:
     out, label = _output_folder(args, scene)
     switches = {"summary.json": scene.output["summary"], "result.vtu": scene.output["vtu"], "fit.png": scene.output["png"]}
     outputs = {name: out / name for name, on in switches.items() if on}
+    history = None
+    if command == "estimate":
+        history = args.history if args.history is not None else out / "history.jsonl"
+        outputs["history.jsonl"] = history
     _refuse_inputs(outputs, scene, label)
+    if command == "estimate" and args.resume and not history.is_file():
+        raise InputError(f"--resume: no history to resume: {history} does not exist (pass --history FILE)")
+    if history is not None:
+        history.parent.mkdir(parents=True, exist_ok=True)
     # Sensitivities are only as accurate as the equilibria: never looser than the inverse default.
     options = scene.solve_options.replace(tolerance=min(scene.solve_options.tolerance, DEFAULT_TOLERANCE))
     base = {
@@ -491,12 +571,26 @@ def _inverse(args: argparse.Namespace) -> int:
         "solver_options": scene.solve_options.to_dict(),
         "options": dict(section),
     }
+    run = RunFolder(out, outputs, INVERSE_OUTPUT_NAMES)
+    try:
+        run.start({**base, "history_file": None if history is None else str(history)})
+        _warn_stale(run)
+        return _inverse_run(args, scene, section, options, history, run, base, label)
+    except (KeyboardInterrupt, OutputError) as exc:
+        run.stopped(_stop_status(exc))
+        if history is not None and isinstance(exc, KeyboardInterrupt):
+            again = "" if args.history is None else f" --history {history}"
+            print(f"error: {_stop_status(exc)}: the history so far is in {history}; go on with the same command "
+                  f"and --resume{again}", file=sys.stderr)
+        raise
+
+
+def _inverse_run(args: argparse.Namespace, scene: Any, section: dict[str, Any], options: Any, history: Path | None,
+                 run: RunFolder, base: dict[str, Any], label: str) -> int:
+    command, outputs, out = args.command, run.outputs, run.folder
+    found = _solve_inverse(command, scene, section, options, history, args)
     if command == "estimate":
-        fit = estimate(
-            scene.body, scene.target, section["params"], section["x0"], bounds=section["bounds"],
-            method=section["method"], starts=section["starts"], regions=scene.regions or None,
-            gravity=scene.gravity, options=options,
-        )
+        fit = found
         m = fit.material
         summary = {
             **base,
@@ -514,10 +608,7 @@ def _inverse(args: argparse.Namespace) -> int:
             _refuse_inputs({"profile.png": outputs["profile.png"]}, scene, label)
         failure = f"the fit did not converge: {fit.message}"
     else:
-        ctl = control(
-            scene.body, scene.target, cables=section["cables"], bounds=section["bounds"], method=section["method"],
-            gravity=scene.gravity, options=options,
-        )
+        ctl = found
         summary = {**base, **ctl.to_dict(), "history": ctl.history, "converged": ctl.reachable}
         ok, result, fitted = ctl.reachable, ctl.result, ctl
         lines = [
@@ -527,24 +618,42 @@ def _inverse(args: argparse.Namespace) -> int:
             f"{'reachable' if ctl.reachable else 'NOT reachable'}, {ctl.forward_solves} forward solves",
         ]
         failure = f"target not reachable: {ctl.message}"
-    if outputs:
-        out.mkdir(parents=True, exist_ok=True)
-    if result is not None and "result.vtu" in outputs:
-        write_result(outputs["result.vtu"], result)
-    if "fit.png" in outputs:
-        plot_fit(fitted, outputs["fit.png"])
-    if "profile.png" in outputs:
-        plot_profile(fitted, outputs["profile.png"])
-    text = _write_summary(outputs, summary)
+    if history is not None:
+        summary["history_file"] = str(history)
+    try:
+        if result is not None and "result.vtu" in outputs:
+            write_result(outputs["result.vtu"], result, run_id=run.run_id)
+        for name, plot in (("fit.png", plot_fit), ("profile.png", plot_profile)):
+            if name in outputs:
+                with atomic_path(outputs[name]) as png:
+                    plot(fitted, png)
+    except (KeyboardInterrupt, OutputError) as exc:
+        _unfinished(run, summary, exc)
+        raise
+    text = run.write_summary(summary, complete=True, status="complete" if ok else "failed")
     if args.json:
         sys.stdout.write(text)
     elif not args.quiet:
         print("\n".join(lines))
-        print(_wrote(outputs, out))
+        print(_wrote({k: v for k, v in outputs.items() if k != "history.jsonl"}, out))
     if not ok:
         print(f"error: {_one_line(Exception(failure))}{_report_in(outputs)}", file=sys.stderr)
         return EXIT_SOLVER
     return EXIT_OK
+
+
+def _solve_inverse(command: str, scene: Any, section: dict[str, Any], options: Any, history: Path | None,
+                   args: argparse.Namespace) -> Any:
+    if command == "estimate":
+        return estimate(
+            scene.body, scene.target, section["params"], section["x0"], bounds=section["bounds"],
+            method=section["method"], starts=section["starts"], regions=scene.regions or None,
+            gravity=scene.gravity, options=options, history_path=history, resume=args.resume,
+        )
+    return control(
+        scene.body, scene.target, cables=section["cables"], bounds=section["bounds"], method=section["method"],
+        gravity=scene.gravity, options=options,
+    )
 
 
 # ---------------------------------------------------------------------------
@@ -566,7 +675,7 @@ def _schema(args: argparse.Namespace) -> int:
     if out.exists() and not args.force:
         raise InputError(f"--out: {out} exists; pass --force to overwrite it")
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(text, encoding="utf-8")
+    write_text(out, text)
     print(f"wrote {out}")
     return EXIT_OK
 
@@ -621,7 +730,7 @@ def _info(args: argparse.Namespace) -> int:
         },
     }
     if args.json:
-        sys.stdout.write(json.dumps(_jsonable(data), indent=2) + "\n")
+        sys.stdout.write(json_text(data))
         return EXIT_OK
     fmt = lambda v: "[" + ", ".join(f"{x:.6g}" for x in v) + "]"  # noqa: E731
     print(f"{args.mesh}")

@@ -40,16 +40,27 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ._deprecated import moved
+from ._files import write_text
+from ._formats import meshio_write
 from ._text import plural
-from ._validate import as_finite, describe, non_negative, positive_int, positive_scalar
+from ._validate import (
+    MAX_MAGNITUDE,
+    MAX_NEWTON_ITERATIONS,
+    MAX_TIME_STEPS,
+    as_finite,
+    describe,
+    non_negative,
+    positive_int,
+    positive_scalar,
+)
 from .body import Body
 from .cables import attached_rest_lengths, cable_index, segment_tensions
-from .errors import ConvergenceError, InputError, ParameterError, ShapeError
+from .errors import ConvergenceError, InputError, Interrupted, ParameterError, ShapeError
 from .progress import Progress
 from .solver import SolveReport
-from .static import StaticResult
+from .static import StaticResult, check_finite_solution, check_magnitudes
 
-__all__ = ["Keyframes", "Trajectory", "simulate", "evaluate_schedule"]
+__all__ = ["Keyframes", "Trajectory", "PvdWriter", "simulate", "evaluate_schedule"]
 
 
 class Keyframes:
@@ -90,6 +101,15 @@ class Keyframes:
         return f"Keyframes({np.column_stack([self.times, self.values]).tolist()})"
 
 
+def _call_schedule(schedule: Callable[[float], Any], t: float, name: str) -> Any:
+    """``schedule(t)``; an exception inside the user's function becomes a :class:`ParameterError`
+    naming the schedule and the time."""
+    try:
+        return schedule(t)
+    except Exception as exc:  # noqa: BLE001 - the user's code may raise anything
+        raise ParameterError(f"{name}: the schedule raised {type(exc).__name__} at t = {t:g} s: {exc}", name) from None
+
+
 def _alpha_column(entry: Any, times: NDArray[np.float64], current: float, name: str) -> NDArray[np.float64]:
     """One cable's alphas at ``times``: a constant, ``None`` (hold ``current``), a callable of
     time, or a sequence of one alpha per step."""
@@ -100,12 +120,15 @@ def _alpha_column(entry: Any, times: NDArray[np.float64], current: float, name: 
     if callable(entry):
         values = []
         for t in times:
-            value = entry(float(t))
+            value = _call_schedule(entry, float(t), name)
             if isinstance(value, bool) or not isinstance(value, numbers.Real):
                 raise ParameterError(f"{name}: the schedule returned {describe(value)} at t = {t:g} s; expected a number", name)
             values.append(float(value))
         return np.array(values)
-    arr = np.asarray(entry, dtype=np.float64)
+    try:
+        arr = np.asarray(entry, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ShapeError(f"{name}: expected a number, a callable of time or {times.size} alphas, got {describe(entry)}") from None
     if arr.shape != times.shape:
         raise ShapeError(f"{name}: expected a number, a callable of time or {times.size} alphas (one per step), got shape {arr.shape}")
     return arr
@@ -132,6 +155,8 @@ def evaluate_schedule(
     --------
     >>> alphas = sf.dynamics.evaluate_schedule(body, lambda t: 1 - 0.4 * min(t, 1), 0.1, 20)  # doctest: +SKIP
     """
+    dt = positive_scalar(dt, "dt")
+    steps = positive_int(steps, "steps", MAX_TIME_STEPS)
     n_cables = len(body.cables)
     current = body.actuations
     times = dt * np.arange(1, steps + 1)
@@ -151,7 +176,7 @@ def evaluate_schedule(
             c = cable_index(body, key)
             out[:, c] = _alpha_column(entry, times, current[c], f"actuation[{c}]")
     elif callable(schedule):
-        values = [schedule(float(t)) for t in times]
+        values = [_call_schedule(schedule, float(t), "actuation") for t in times]
         if n_cables == 0:
             raise InputError("actuation: the body has no cables to actuate")
         if all(isinstance(v, numbers.Real) and not isinstance(v, bool) for v in values):
@@ -184,6 +209,107 @@ def evaluate_schedule(
             "actuation",
         )
     return np.ascontiguousarray(out)
+
+
+class PvdWriter:
+    """Writes the frames of a simulation as they come: ``directory/name/frame_NNNNN.vtu`` and the
+    index ``directory/name.pvd`` that lists them (ParaView reads it as a time series).
+
+    Each frame is written to a temporary name and renamed; the index is rewritten (the same
+    way) after every :meth:`add` that follows the previous one by ``every`` seconds, and by
+    :meth:`close`, so at any moment it lists complete frames only. Pass :meth:`add` as
+    ``on_frames=`` of :func:`simulate` to write frames while the integration runs.
+
+    ``run_id`` (an integer) marks the files of one run: it is each frame's field data
+    ``sorofem_run_id`` and an attribute of the index; frames of another run left in the folder
+    beyond this run's last frame are never listed.
+
+    Examples
+    --------
+    >>> writer = sf.dynamics.PvdWriter(body, "results/pull")             # doctest: +SKIP
+    >>> traj = sf.simulate(body, 0.01, 100, on_frames=writer.add)      # doctest: +SKIP
+    >>> writer.close()                                                 # doctest: +SKIP
+    """
+
+    def __init__(self, body: Body, directory: str | os.PathLike[str], name: str = "trajectory", *,
+                 run_id: int | None = None, every: float = 2.0) -> None:
+        self.body = body
+        self.directory = Path(directory)
+        self.name = name
+        self.run_id = run_id
+        self.every = every
+        self.frames_dir = self.directory / name
+        self.frames_dir.mkdir(parents=True, exist_ok=True)
+        self.entries: list[str] = []
+        self._indexed_at = time.perf_counter()
+        self._model = body.core_model()
+        rest_cables = [c.points for c in body.cables]
+        self._rest_cables = np.vstack(rest_cables) if rest_cables else None
+        self._lines = None
+        self._rest_lengths = np.concatenate(
+            [body.attached_rest_lengths(c) for c in range(len(body.cables))]) if rest_cables else None
+        if rest_cables:
+            offsets = np.cumsum([body.mesh.n_nodes] + [len(p) for p in rest_cables])
+            self._lines = np.vstack(
+                [np.column_stack([np.arange(a, b - 1), np.arange(a + 1, b)]) for a, b in zip(offsets[:-1], offsets[1:])]
+            ).astype(np.int64)
+
+    @property
+    def pvd(self) -> Path:
+        return self.directory / f"{self.name}.pvd"
+
+    @property
+    def n_frames(self) -> int:
+        """Frames written so far."""
+        return len(self.entries)
+
+    def add(self, times: ArrayLike, positions: ArrayLike, cable_points: Sequence[Sequence[ArrayLike]] = ()) -> None:
+        """Write frames: their ``times`` ``(k,)``, node ``positions`` ``(k, n_nodes, 3)`` and, with
+        cables, per frame one ``(p, 3)`` array per cable."""
+        import meshio
+
+        mesh = self.body.mesh
+        times = np.asarray(times, dtype=np.float64).reshape(-1)
+        positions = np.asarray(positions, dtype=np.float64).reshape(times.size, mesh.n_nodes, 3)
+        for k in range(times.size):
+            f = len(self.entries)
+            x = positions[k]
+            j = np.asarray(self._model.element_fields(x)["J"], dtype=np.float64)
+            points, disp = x, x - mesh.points
+            cells: list[tuple[str, NDArray[np.int64]]] = [("tetra", mesh.tets)]
+            cell_j = [j]
+            if self._lines is not None and k < len(cable_points):
+                cable_x = np.vstack([np.asarray(c, dtype=np.float64) for c in cable_points[k]])
+                points = np.vstack([x, cable_x])
+                disp = np.vstack([disp, cable_x - self._rest_cables])
+                cells.append(("line", self._lines))
+                # A segment's "volume ratio" is its stretch, deformed over rest length.
+                lengths = np.linalg.norm(points[self._lines[:, 1]] - points[self._lines[:, 0]], axis=1)
+                cell_j.append(lengths / self._rest_lengths)
+            file = self.frames_dir / f"frame_{f:05d}.vtu"
+            meshio_write(file, meshio.Mesh(points, cells, point_data={"displacement": disp}, cell_data={"J": cell_j}),
+                         run_id=self.run_id)
+            self.entries.append(
+                f'    <DataSet timestep="{float(times[k])!r}" group="" part="0" '
+                f"file={quoteattr(f'{self.name}/{file.name}')}/>"
+            )
+        if time.perf_counter() - self._indexed_at >= self.every:
+            self._write_index()
+
+    def _write_index(self) -> None:
+        run = "" if self.run_id is None else f' sorofem_run_id="{self.run_id}"'
+        write_text(
+            self.pvd,
+            f'<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1"{run}>\n  <Collection>\n'
+            + "\n".join(self.entries)
+            + "\n  </Collection>\n</VTKFile>\n",
+        )
+        self._indexed_at = time.perf_counter()
+
+    def close(self) -> Path:
+        """Write the index of every frame written; returns its path."""
+        self._write_index()
+        return self.pvd
 
 
 class Trajectory:
@@ -263,55 +389,21 @@ class Trajectory:
             for c, cable in enumerate(self.body.cables)
         ]
 
-    def write_pvd(self, directory: str | os.PathLike[str], name: str = "trajectory") -> Path:
+    def write_pvd(self, directory: str | os.PathLike[str], name: str = "trajectory", *, run_id: int | None = None) -> Path:
         """Write ``directory/name.pvd`` and one ``directory/name/frame_NNNNN.vtu`` per frame
         (ParaView reads the ``.pvd`` as a time series).
 
         Each ``.vtu`` holds the deformed tetrahedra (point data ``displacement``, cell data
         ``J``) and, when the body has cables, the cables as line cells after the tets (their
-        points appended after the nodes). Returns the ``.pvd`` path.
+        points appended after the nodes; a segment's ``J`` is its stretch, deformed over rest
+        length). Every file is written to a temporary name and
+        renamed (:func:`sorofem.io.atomic_path`), the ``.pvd`` last, so it only ever lists
+        complete frames. ``run_id`` marks every file (see :class:`PvdWriter`). Returns the
+        ``.pvd`` path.
         """
-        import meshio
-
-        directory = Path(directory)
-        frames_dir = directory / name
-        frames_dir.mkdir(parents=True, exist_ok=True)
-        model = self.body.core_model()
-        tets = self.mesh.tets
-        rest_cables = [c.points for c in self.body.cables]
-        lines = None
-        if rest_cables:
-            offsets = np.cumsum([self.mesh.n_nodes] + [len(p) for p in rest_cables])
-            lines = np.vstack(
-                [np.column_stack([np.arange(a, b - 1), np.arange(a + 1, b)]) for a, b in zip(offsets[:-1], offsets[1:])]
-            ).astype(np.int64)
-        entries = []
-        for f in range(self.n_frames):
-            x = self.positions[f]
-            j = np.asarray(model.element_fields(x)["J"], dtype=np.float64)
-            points, disp = x, x - self.mesh.points
-            cells: list[tuple[str, NDArray[np.int64]]] = [("tetra", tets)]
-            cell_j = [j]
-            if lines is not None and f < len(self.cable_points):
-                cable_x = np.vstack(self.cable_points[f])
-                points = np.vstack([x, cable_x])
-                disp = np.vstack([disp, cable_x - np.vstack(rest_cables)])
-                cells.append(("line", lines))
-                cell_j.append(np.full(len(lines), np.nan))
-            file = frames_dir / f"frame_{f:05d}.vtu"
-            meshio.write(file, meshio.Mesh(points, cells, point_data={"displacement": disp}, cell_data={"J": cell_j}))
-            entries.append(
-                f'    <DataSet timestep="{float(self.times[f])!r}" group="" part="0" '
-                f"file={quoteattr(f'{name}/{file.name}')}/>"
-            )
-        pvd = directory / f"{name}.pvd"
-        pvd.write_text(
-            '<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n'
-            + "\n".join(entries)
-            + "\n  </Collection>\n</VTKFile>\n",
-            encoding="utf-8",
-        )
-        return pvd
+        writer = PvdWriter(self.body, directory, name, run_id=run_id)
+        writer.add(self.times, self.positions, self.cable_points)
+        return writer.close()
 
     def to_dict(self) -> dict[str, Any]:
         """Summary for ``summary.json`` (plain JSON types)."""
@@ -356,6 +448,7 @@ def simulate(
     tolerance: float = 1e-8,
     max_iterations: int = 50,
     progress: bool | None = None,
+    on_frames: Callable[[NDArray[np.float64], NDArray[np.float64], list[Any]], None] | None = None,
     method: str = "modified",
 ) -> Trajectory:
     """Integrate the body's motion in time with implicit Euler (see the module docstring).
@@ -400,6 +493,11 @@ def simulate(
         run lasts more than half a second, ``True`` always, ``False`` never; see
         :mod:`sorofem.progress`. With the line shown the steps run in chunks of about 0.2 s
         (same states; a body with free cable nodes runs in one piece, only the clock moves).
+    on_frames
+        Called with the frames saved since the last call, ``(times (k,), positions (k, n_nodes,
+        3), cable_points)`` (per frame, one ``(p, 3)`` array per cable), as the integration
+        goes: e.g. :meth:`PvdWriter.add`, so that the frames are on disk while it runs. With it
+        the steps run in chunks of about 0.2 s, as with the progress line.
 
     Returns
     -------
@@ -408,8 +506,18 @@ def simulate(
 
     Raises
     ------
+    ParameterError
+        An argument out of range (``steps`` and ``save_every`` at most 1,000,000,
+        ``max_iterations`` at most 10,000, ``dt * steps`` at most 1e150 s: documented limits),
+        or loads and stiffnesses too large (:func:`sorofem.static.check_magnitudes`).
     ConvergenceError
         A step failed even after splitting it six times.
+    SolverError
+        The integration produced non-finite values.
+    Interrupted
+        Ctrl-C between two chunks of steps (when the steps run in chunks: with a progress line
+        or ``on_frames``); ``err.result`` is the :class:`Trajectory` of the steps done (None
+        before the first chunk ended).
 
     Examples
     --------
@@ -423,13 +531,18 @@ def simulate(
     if not isinstance(body, Body):
         raise InputError(f"body: expected a sorofem.Body, got {describe(body)}")
     dt = positive_scalar(dt, "dt")
-    steps = positive_int(steps, "steps")
-    save_every = positive_int(save_every, "save_every")
+    steps = positive_int(steps, "steps", MAX_TIME_STEPS)
+    if not dt * steps <= MAX_MAGNITUDE:
+        raise ParameterError(f"dt: the simulated time dt * steps is {dt * steps:g} s, above the documented limit "
+                             f"{MAX_MAGNITUDE:g} s", "dt")
+    save_every = positive_int(save_every, "save_every", MAX_TIME_STEPS)
     tol = positive_scalar(tolerance, "tolerance")
-    iters = positive_int(max_iterations, "max_iterations")
+    iters = positive_int(max_iterations, "max_iterations", MAX_NEWTON_ITERATIONS)
     if method not in STEP_METHODS:
         raise ParameterError(f"method: expected one of {', '.join(map(repr, STEP_METHODS))}, got {method!r}", "method")
     g = as_finite(gravity, "gravity", (3,))
+    if on_frames is not None and not callable(on_frames):
+        raise InputError(f"on_frames: expected a callable or None, got {describe(on_frames)}")
     if not isinstance(damping, (tuple, list)) or len(damping) != 2:
         raise ParameterError(f"damping: expected (alpha_M, beta_K), got {describe(damping)}", "damping")
     mass_damping = non_negative(damping[0], "damping[0] (alpha_M)")
@@ -453,6 +566,7 @@ def simulate(
     if initial_velocity is not None:
         v0 = as_finite(initial_velocity, "initial_velocity", (n, 3))
     alphas = evaluate_schedule(body, actuation, dt, steps)
+    check_magnitudes(body, g)
 
     model = body.core_model()
     forces, prescribed = body.forces, body.prescribed_displacement
@@ -465,19 +579,28 @@ def simulate(
         )
 
     bar = Progress(total=steps, desc="simulate", unit="steps", enabled=progress)
+    joined = _Joined()
     try:
-        if not bar.active:
-            out = run(steps, alphas, x0, v0, save_every)
-        elif _has_free_cable_nodes(body):
+        if not (bar.active or on_frames is not None) or _has_free_cable_nodes(body):
             # Free cable nodes' velocities do not survive a restart: one piece, a moving clock.
             out = run(steps, alphas, x0, v0, save_every)
+            check_finite_solution(out, None, "the time integration")
             bar.set(steps, postfix=_step_postfix(out, steps, dt))
+            if on_frames is not None:
+                on_frames(out["times"], np.asarray(out["positions"]).reshape(-1, n, 3), list(out.get("cable_points", [])))
         else:
-            out = _run_in_chunks(run, steps, save_every, alphas, x0, v0, dt, bar)
+            out = _run_in_chunks(run, steps, save_every, alphas, x0, v0, dt, bar, joined, on_frames)
     except ConvergenceError as err:
         if isinstance(err.report, dict):
             err.report = SolveReport.from_dict(err.report, body.formulation)
         raise
+    except KeyboardInterrupt as stop:
+        partial = None
+        if joined.done:
+            partial = Trajectory(body, dt, joined.output(), alphas[: joined.done], time.perf_counter() - start)
+        raise Interrupted(
+            f"simulate: interrupted after {joined.done} of {steps} steps", partial, getattr(stop, "signal", "SIGINT")
+        ) from None
     finally:
         bar.close()
         # The extension leaves the last step's alphas in the model; the body's own stay in charge.
@@ -510,25 +633,55 @@ CHUNK_SECONDS = 0.2
 _STEP_IN_MESSAGE = re.compile(r"time step (\d+) \(t = ([0-9.eE+-]+) s\)")
 
 
+class _Joined:
+    """The outputs of the chunks integrated so far, joined as one call would return them."""
+
+    def __init__(self) -> None:
+        self.times: list[NDArray[np.float64]] = []
+        self.positions: list[NDArray[np.float64]] = []
+        self.kinetic_energy: list[NDArray[np.float64]] = []
+        self.cable_points: list[Any] = []
+        self.iterations: list[NDArray[np.int64]] = []
+        self.factorizations: list[NDArray[np.int64]] = []
+        self.residuals: list[NDArray[np.float64]] = []
+        self.cutbacks = 0
+        self.velocities: Any = None
+        #: Steps integrated.
+        self.done = 0
+
+    def output(self) -> dict[str, Any]:
+        return {
+            "times": np.concatenate(self.times),
+            "positions": np.concatenate(self.positions),
+            "velocities": self.velocities,
+            "kinetic_energy": np.concatenate(self.kinetic_energy),
+            "cable_points": self.cable_points,
+            "iterations": np.concatenate(self.iterations),
+            "factorizations": np.concatenate(self.factorizations),
+            "residuals": np.concatenate(self.residuals),
+            "cutbacks": self.cutbacks,
+        }
+
+
 def _run_in_chunks(
     run: Callable[..., dict[str, Any]], steps: int, save_every: int, alphas: NDArray[np.float64],
-    x0: Any, v0: Any, dt: float, bar: Progress,
+    x0: Any, v0: Any, dt: float, bar: Progress, joined: _Joined,
+    on_frames: Callable[..., None] | None = None,
 ) -> dict[str, Any]:
     """Integrate ``steps`` steps as consecutive calls of ``run`` (each continuing from the
-    previous one's last positions and velocities), so that ``bar`` moves in between, and join
-    their outputs into what one call would return.
+    previous one's last positions and velocities), so that ``bar`` moves, ``on_frames`` receives
+    the new frames and Ctrl-C is answered in between; ``joined`` collects their outputs into
+    what one call would return (and holds what was done when an interruption stops the loop).
 
     Chunk boundaries never cross a save point (a multiple of ``save_every``) except from
     another one, so every chunk saves exactly the frames the whole run would: with local
     ``save_every`` when the chunk starts on a save point and spans whole intervals, otherwise
     only its end, kept if that is a save point. The first chunk is one step; later ones aim at
     :data:`CHUNK_SECONDS` each."""
-    joined: dict[str, Any] = {"times": [], "positions": [], "kinetic_energy": [], "cable_points": [],
-                              "iterations": [], "factorizations": [], "residuals": [], "cutbacks": 0,
-                              "velocities": None}
-    done, t_offset, size = 0, 0.0, 1
+    t_offset, size = 0.0, 1
     x, v = x0, v0
-    while done < steps:
+    while joined.done < steps:
+        done = joined.done
         n = min(size, steps - done)
         if done % save_every == 0 and (n >= save_every or done + n == steps):
             if done + n != steps:
@@ -544,38 +697,33 @@ def _run_in_chunks(
         except ConvergenceError as err:
             _shift_step_in_message(err, done, t_offset)
             raise
+        check_finite_solution(out, None, "the time integration")
         per_step = (time.perf_counter() - tick) / n
         times = np.asarray(out["times"], dtype=np.float64)
         positions = np.asarray(out["positions"], dtype=np.float64).reshape(times.size, -1, 3)
         keep = slice(0 if done == 0 else 1, None)
         if end % save_every and end != steps:
             keep = slice(keep.start, -1)  # the end of a chunk inside a save interval
-        joined["times"].append(t_offset + times[keep])
-        joined["positions"].append(positions[keep])
-        joined["kinetic_energy"].append(np.asarray(out["kinetic_energy"], dtype=np.float64)[keep])
-        joined["cable_points"].extend(list(out.get("cable_points", []))[keep])
-        joined["iterations"].append(np.asarray(out["iterations"], dtype=np.int64))
-        joined["factorizations"].append(np.asarray(out["factorizations"], dtype=np.int64))
-        joined["residuals"].append(np.asarray(out["residuals"], dtype=np.float64))
-        joined["cutbacks"] += int(out.get("cutbacks", 0))
-        joined["velocities"] = out["velocities"]
+        new_times, new_positions = t_offset + times[keep], positions[keep]
+        new_cables = list(out.get("cable_points", []))[keep]
+        joined.times.append(new_times)
+        joined.positions.append(new_positions)
+        joined.kinetic_energy.append(np.asarray(out["kinetic_energy"], dtype=np.float64)[keep])
+        joined.cable_points.extend(new_cables)
+        joined.iterations.append(np.asarray(out["iterations"], dtype=np.int64))
+        joined.factorizations.append(np.asarray(out["factorizations"], dtype=np.int64))
+        joined.residuals.append(np.asarray(out["residuals"], dtype=np.float64))
+        joined.cutbacks += int(out.get("cutbacks", 0))
+        joined.velocities = out["velocities"]
+        joined.done = end
         x, v = positions[-1], np.asarray(out["velocities"], dtype=np.float64)
         t_offset += float(times[-1])
-        done = end
-        iterations = np.concatenate(joined["iterations"])
-        bar.set(done, postfix=_postfix(t_offset, float(iterations.mean()), joined["cutbacks"]))
+        if on_frames is not None and new_times.size:
+            on_frames(new_times, new_positions, new_cables)
+        iterations = np.concatenate(joined.iterations)
+        bar.set(end, postfix=_postfix(t_offset, float(iterations.mean()), joined.cutbacks))
         size = max(1, int(CHUNK_SECONDS / max(per_step, 1e-9)))
-    return {
-        "times": np.concatenate(joined["times"]),
-        "positions": np.concatenate(joined["positions"]),
-        "velocities": joined["velocities"],
-        "kinetic_energy": np.concatenate(joined["kinetic_energy"]),
-        "cable_points": joined["cable_points"],
-        "iterations": np.concatenate(joined["iterations"]),
-        "factorizations": np.concatenate(joined["factorizations"]),
-        "residuals": np.concatenate(joined["residuals"]),
-        "cutbacks": joined["cutbacks"],
-    }
+    return joined.output()
 
 
 def _shift_step_in_message(err: ConvergenceError, first_step: int, t_offset: float) -> None:

@@ -3,7 +3,10 @@
 Every error that sorofem raises on purpose is a :class:`SorofemError`. Bad input
 (shapes, meshes, parameters, scene files) is an :class:`InputError`, which is also a
 :class:`ValueError`; a solver that could not do its job raises a :class:`SolverError`,
-which is also a :class:`RuntimeError`. The Rust extension ``sorofem._core`` imports
+which is also a :class:`RuntimeError`. A file that cannot be written (disk full, file-size limit,
+no permission) is an :class:`OutputError`; a run stopped by Ctrl-C (or, on the command line,
+SIGTERM) raises :class:`Interrupted`, a :class:`KeyboardInterrupt` carrying what was done. The
+Rust extension ``sorofem._core`` imports
 these very classes and raises them, so ``except sorofem.MeshError`` catches errors from
 both sides.
 
@@ -31,6 +34,8 @@ __all__ = [
     "SceneError",
     "SolverError",
     "ConvergenceError",
+    "OutputError",
+    "Interrupted",
 ]
 
 
@@ -129,3 +134,47 @@ class ConvergenceError(SolverError):
         # The extension constructs the error from the message alone and sets
         # `report` afterwards, so it must stay a plain settable attribute.
         self.report = report
+
+
+class OutputError(SorofemError, OSError):
+    """An output file could not be written: no space left on the device, a file-size limit,
+    no permission, a read-only file system, or a folder where the file should go.
+
+    The message names the file and the reason. Nothing half-written is left under that
+    name: sorofem writes every output to a temporary file in the same folder and renames it
+    over the name only once it is complete (:func:`sorofem.io.atomic_path`), so the name
+    keeps its previous content (or stays absent).
+
+    Attributes
+    ----------
+    path
+        The file that could not be written.
+    """
+
+    def __init__(self, message: str = "", path: str | PathLike[str] | None = None, errno: int | None = None) -> None:
+        super().__init__(message)
+        self.path = path
+        self.errno = errno
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else ""
+
+
+class Interrupted(KeyboardInterrupt):
+    """A run was stopped by Ctrl-C (SIGINT) or, on the command line, SIGTERM, between two
+    steps of its work. It is a :class:`KeyboardInterrupt`, so code that does not know it
+    stops as before.
+
+    Attributes
+    ----------
+    result
+        What was finished before the interruption, when the function can say (a partial
+        :class:`sorofem.Trajectory` of the frames saved so far), else ``None``.
+    signal
+        ``"SIGINT"`` or ``"SIGTERM"``.
+    """
+
+    def __init__(self, message: str = "interrupted", result: Any = None, signal: str = "SIGINT") -> None:
+        super().__init__(message)
+        self.result = result
+        self.signal = signal

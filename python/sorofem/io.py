@@ -48,19 +48,26 @@ Examples
 
 from __future__ import annotations
 
+import json
+import math
 import os
+import re
+import secrets
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Mapping, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._formats import CELL_TAG_KEYS, Surface, meshio_read, read_surface, refuse_overwrite
+from ._files import MAX_NAME_BYTES, MAX_PATH_BYTES, append_line, atomic_path, check_path, write_text
+from ._formats import CELL_TAG_KEYS, Surface, meshio_read, meshio_write, read_surface, refuse_overwrite
 from .errors import InputError
 from .mesh import Mesh
 
 __all__ = ["read_mesh", "write_mesh", "write_result", "result_mesh", "read_points", "read_surface", "Surface",
-           "CELL_TAG_KEYS", "meshio_read"]
+           "CELL_TAG_KEYS", "meshio_read", "atomic_path", "write_text", "append_line", "check_path", "MAX_NAME_BYTES",
+           "MAX_PATH_BYTES", "json_text", "new_run_id", "RunFolder"]
 
 PathLike = str | os.PathLike[str]
 
@@ -203,7 +210,7 @@ def result_mesh(
     """
     import meshio
 
-    if points not in ("rest", "deformed"):
+    if not isinstance(points, str) or points not in ("rest", "deformed"):
         raise InputError(f"points: expected 'rest' or 'deformed', got {points!r}")
     mesh = result.mesh
     point_data: dict[str, np.ndarray] = {"displacement": result.displacement}
@@ -227,22 +234,168 @@ def write_result(
     extra_point_data: Mapping[str, ArrayLike] | None = None,
     *,
     points: str = "rest",
+    run_id: int | None = None,
 ) -> None:
-    """Write a result (normally ``.vtu``) for ParaView: :func:`result_mesh` written by meshio.
+    """Write a result (normally ``.vtu``) for ParaView: :func:`result_mesh` written by meshio,
+    to a temporary name renamed over ``path`` (:func:`atomic_path`).
 
     The points are the **rest** positions and the point data ``displacement`` carries the
     motion (the finite-element convention): in ParaView, "Warp By Vector" on ``displacement``
     with scale 1 shows the deformed body, once. ``points="deformed"`` writes the deformed
-    positions instead (e.g. a second file ``deformed.vtu`` to open without a filter).
+    positions instead (e.g. a second file ``deformed.vtu`` to open without a filter). ``run_id``
+    (an integer, as ``sorofem run`` gives each run) marks a ``.vtu`` with the field data
+    ``sorofem_run_id``.
 
     Raises
     ------
     InputError
-        ``path`` is the input mesh file, ``points`` is unknown, or ``extra_point_data`` has a
-        wrong length.
+        ``path`` is the input mesh file, ``points`` is unknown, ``extra_point_data`` has a
+        wrong length, the format is unknown, or a field is not finite (nothing is written).
+    OutputError
+        The file cannot be written.
     """
-    import meshio
-
-    path = Path(path)
+    path = check_path(path, "path")
     refuse_overwrite(path, result.mesh.source)
-    meshio.write(path, result_mesh(result, extra_point_data, points=points))
+    mesh = result_mesh(result, extra_point_data, points=points)
+    arrays = [("positions", result.positions), *mesh.point_data.items(),
+              *((name, blocks[0]) for name, blocks in mesh.cell_data.items())]
+    for name, values in arrays:
+        arr = np.asarray(values)
+        if np.issubdtype(arr.dtype, np.number) and not np.all(np.isfinite(arr)):
+            raise InputError(f"result: {name} has non-finite values; refusing to write them to {path}")
+    meshio_write(path, mesh, run_id=run_id)
+
+
+def jsonable(value: Any) -> Any:
+    """``value`` as plain JSON types (NumPy scalars and arrays converted); a non-finite float,
+    which JSON cannot hold, becomes ``None`` (``null``)."""
+    if isinstance(value, dict):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return jsonable(value.tolist())
+    if isinstance(value, (np.floating, float)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, (np.integer,)):
+        return int(value)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    return value
+
+
+def json_text(value: Any, indent: int | None = 2) -> str:
+    """Valid JSON text of ``value`` (:func:`jsonable`: never NaN or Infinity), ending with a
+    newline when indented.
+
+    Examples
+    --------
+    >>> sf.io.json_text({"loss": float("nan"), "n": np.int64(3)}, indent=None)  # doctest: +SKIP
+    '{"loss": null, "n": 3}'
+    """
+    text = json.dumps(jsonable(value), indent=indent, allow_nan=False)
+    return text + "\n" if indent is not None else text
+
+
+def new_run_id() -> int:
+    """A random 48-bit integer that marks the files of one run (``summary.json``'s ``run_id``,
+    the ``sorofem_run_id`` field data of its ``.vtu`` files)."""
+    return secrets.randbits(48)
+
+
+_FRAME = re.compile(r"frame_\d+\.vtu")
+#: The temporary name atomic_path writes to: .STEM.tmp-XXXXXXXX.SUFFIX
+_TEMPORARY = re.compile(r"\..+\.tmp-[0-9a-f]{8}(\.[^.]+)?")
+
+
+class RunFolder:
+    """The output folder of one run of ``sorofem run``, ``estimate`` or ``control``: its run id,
+    the ``summary.json`` that marks it, and what an earlier run left there.
+
+    The rule: a command owns a fixed set of names in its folder (``owned``; for ``run`` the
+    files it writes for static and dynamic scenes). When a run starts, it
+
+    * draws a :attr:`run_id` that every file it writes carries (``summary.json``'s
+      ``run_id``, the ``.vtu`` files' field data ``sorofem_run_id``, ``trajectory.pvd``'s
+      attribute);
+    * writes ``summary.json`` at once with ``"complete": false`` and ``"status": "running"``,
+      so a run killed at any point (even by SIGKILL) leaves a summary that says so;
+    * removes the frames ``frame_NNNNN.vtu`` of an earlier run from the frames folder
+      (``trajectory/``, which is sorofem's own) when it will write frames, and the hidden
+      temporary files (``.NAME.tmp-XXXXXXXX.SUFFIX``) of owned names that a killed run left;
+    * lists the other owned names present that it will not write in ``stale_outputs`` (in
+      ``summary.json``, and a warning on stderr): they are an earlier run's, and are left
+      alone.
+
+    Every file is written to a temporary name and renamed (:func:`atomic_path`);
+    ``summary.json`` is written last, with ``"complete": true`` only once every other output
+    is on the disk.
+    """
+
+    def __init__(self, folder: Path, outputs: Mapping[str, Path], owned: tuple[str, ...], frames: str | None = None) -> None:
+        self.folder = Path(folder)
+        self.outputs = dict(outputs)
+        self.owned = owned
+        self.frames = frames
+        self.run_id = new_run_id()
+        self.started = _now()
+        self.stale: list[str] = []
+        #: The last summary written and its status ("running" until the run ends).
+        self.summary: dict[str, Any] = {}
+        self.status = "running"
+
+    def start(self, summary: Mapping[str, Any]) -> None:
+        """Create the folder, find stale outputs, clear old frames, write the first summary."""
+        if self.outputs:
+            self.folder.mkdir(parents=True, exist_ok=True)
+        self.stale = sorted(
+            name for name in self.owned if name not in self.outputs and (self.folder / name).exists()
+        )
+        if self.frames is not None and self.frames in self.outputs and (self.folder / self.frames).is_dir():
+            for old in (self.folder / self.frames).iterdir():
+                if _FRAME.fullmatch(old.name) or _TEMPORARY.fullmatch(old.name):
+                    old.unlink()
+        if self.folder.is_dir():
+            for old in self.folder.iterdir():
+                # What a killed run (SIGKILL, power loss) left while writing one of these names.
+                if _TEMPORARY.fullmatch(old.name) and old.name.split(".tmp-")[0][1:] in self._stems():
+                    old.unlink()
+        self.write_summary(summary, complete=False, status="running")
+
+    def _stems(self) -> set[str]:
+        return {Path(name).stem for name in self.owned}
+
+    def write_summary(self, summary: Mapping[str, Any], *, complete: bool, status: str) -> str:
+        """The summary marked with the run (id, start and end times, ``complete``, ``status``,
+        stale outputs) as JSON text, written to ``summary.json`` if it is an output."""
+        marked = {
+            **summary,
+            "run_id": self.run_id,
+            "started": self.started,
+            "finished": _now() if status != "running" else None,
+            "complete": complete,
+            "status": status,
+            "stale_outputs": self.stale,
+        }
+        text = json_text(marked)
+        self.summary, self.status = dict(summary), status
+        if "summary.json" in self.outputs:
+            write_text(self.outputs["summary.json"], text)
+        return text
+
+    def stopped(self, status: str) -> None:
+        """Mark a run that stopped before it wrote its final summary (Ctrl-C, SIGTERM, a full
+        disk): the last summary again, with ``"complete": false`` and ``status`` (best effort:
+        a full disk may refuse this too)."""
+        if self.status != "running":
+            return
+        try:
+            self.write_summary(self.summary, complete=False, status=status)
+        except OSError:
+            pass
+
+
+def _now() -> str:
+    return datetime.now(timezone.utc).isoformat(timespec="seconds")

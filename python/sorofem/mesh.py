@@ -24,8 +24,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ._extension import core
+from ._files import check_path
 from ._formats import read_volume, refuse_overwrite, write_volume
-from ._validate import as_finite, as_float_array, describe, positive_scalar
+from ._validate import MAX_INDEX, MESH_SIZE, as_finite, as_float_array, check_memory, count, describe, positive_scalar
 from .errors import InputError, MeshError, ParameterError, ShapeError
 
 __all__ = ["Mesh", "Bounds", "ORIENTATIONS"]
@@ -46,8 +47,27 @@ class Bounds(NamedTuple):
                       DeprecationWarning, stacklevel=2)
         return self
 
+#: Bytes a mesh holds per node and per tetrahedron while it is built (the extension's arrays,
+#: NumPy's copy and the checked copy): the estimate :meth:`Mesh.box` checks against the
+#: machine's memory before it allocates anything.
+MESH_BYTES_PER_NODE = 3 * 24
+MESH_BYTES_PER_TET = 3 * 32
+
 #: What :class:`Mesh` does with inverted tetrahedra: swap two nodes, or raise.
 ORIENTATIONS: tuple[str, ...] = ("reorient", "reject")
+
+
+def _check_size(extent: NDArray[np.float64], name: str) -> None:
+    """A :class:`MeshError` unless the bounding-box diagonal of ``extent`` (its edge lengths, m)
+    is within the documented :data:`~sorofem._validate.MESH_SIZE`."""
+    top = float(np.max(np.abs(extent)))
+    diagonal = top * float(np.linalg.norm(extent / top)) if top > 0 else 0.0
+    if not MESH_SIZE[0] <= diagonal <= MESH_SIZE[1]:
+        raise MeshError(
+            f"{name}: the mesh's size (bounding-box diagonal) is {diagonal:g} m; expected from {MESH_SIZE[0]:g} "
+            f"to {MESH_SIZE[1]:g} m (a documented limit: beyond it volumes and stiffnesses leave the range of "
+            "float64; check the units, e.g. a scale of 1e-3 for millimetres)"
+        )
 
 
 class Mesh:
@@ -80,7 +100,7 @@ class Mesh:
     """
 
     def __init__(self, points: ArrayLike, tets: ArrayLike, orientation: str = "reorient") -> None:
-        if orientation not in ORIENTATIONS:
+        if not isinstance(orientation, str) or orientation not in ORIENTATIONS:
             raise InputError(f"orientation: expected one of {ORIENTATIONS}, got {orientation!r}")
         pts = as_float_array(points, "points", (None, 3))
         tet_arr = np.asarray(tets)
@@ -98,6 +118,7 @@ class Mesh:
         if not np.all(np.isfinite(pts)):
             row = int(np.argwhere(~np.isfinite(pts))[0, 0])
             raise MeshError(f"points: expected finite coordinates, got {pts[row].tolist()} at node {row}")
+        _check_size(pts.max(axis=0) - pts.min(axis=0) if len(pts) else np.zeros(3), "points")
         if tet_arr.min() < 0 or tet_arr.max() >= len(pts):
             bad = int(np.argwhere((tet_arr < 0) | (tet_arr >= len(pts)))[0, 0])
             raise MeshError(
@@ -142,11 +163,16 @@ class Mesh:
         size_arr = as_finite(size, "size", (3,))
         if np.any(size_arr <= 0):
             raise ParameterError(f"size: expected three positive lengths, got {size_arr.tolist()}", "size")
-        cells_arr = np.asarray(cells)
-        if cells_arr.shape != (3,) or not np.issubdtype(cells_arr.dtype, np.integer) or np.any(cells_arr < 1):
-            raise ParameterError(f"cells: expected three integers >= 1, got {describe(cells_arr)}", "cells")
+        _check_size(size_arr, "size")
+        values = cells.tolist() if isinstance(cells, np.ndarray) else cells
+        if not isinstance(values, (list, tuple)) or len(values) != 3:
+            raise ParameterError(f"cells: expected three integers from 1 to {MAX_INDEX}, got {describe(cells)}", "cells")
+        nx, ny, nz = cells_list = [count(c, "cells", 1, MAX_INDEX) for c in values]
+        n_nodes, n_tets = (nx + 1) * (ny + 1) * (nz + 1), 6 * nx * ny * nz
+        check_memory(MESH_BYTES_PER_NODE * n_nodes + MESH_BYTES_PER_TET * n_tets,
+                     f"a box of {nx} x {ny} x {nz} cells ({n_tets:.3g} tetrahedra)", "cells")
         origin_arr = as_finite(origin, "origin", (3,))
-        points, tets = core().box_mesh(size_arr, cells_arr.astype(np.int64), origin_arr)
+        points, tets = core().box_mesh(size_arr, np.array(cells_list, dtype=np.int64), origin_arr)
         return cls(points, tets)
 
     @classmethod
@@ -172,13 +198,13 @@ class Mesh:
         --------
         >>> mesh = sf.Mesh.read("box2.tet", scale=1.0)  # doctest: +SKIP
         """
-        path = Path(path)
+        path = check_path(path, "path")
         if isinstance(scale, bool) or not isinstance(scale, numbers.Real) or not (0 < scale < float("inf")):
             raise ParameterError(f"scale: expected a finite positive number, got {scale!r}", "scale")
         points, tets, tags = read_volume(path)
         try:
             mesh = cls(points * float(scale), tets)
-        except MeshError as exc:
+        except InputError as exc:
             raise MeshError(f"{path}: {exc}") from None
         mesh.source = path
         if tags is not None:
@@ -195,7 +221,7 @@ class Mesh:
         InputError
             ``path`` is the file the mesh was read from (:attr:`source`).
         """
-        path = Path(path)
+        path = check_path(path, "path")
         refuse_overwrite(path, self.source)
         write_volume(path, self._points, self._tets)
 

@@ -63,7 +63,7 @@ def result_field(result: StaticResult, name: str, what: str = "color_by") -> tup
         ``name`` is not one of :data:`COLOR_FIELDS`, or is ``"pressure"`` for a result without
         a pressure field (standard formulation); ``what`` names the option in the message.
     """
-    if name not in COLOR_FIELDS:
+    if not isinstance(name, str) or name not in COLOR_FIELDS:
         raise InputError(f"{what}: expected one of {', '.join(map(repr, COLOR_FIELDS))}, got {name!r}")
     if name == "displacement":
         return np.linalg.norm(result.displacement, axis=1), True, _LABELS[name]

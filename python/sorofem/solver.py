@@ -24,7 +24,7 @@ from typing import Any
 
 from ._extension import core
 from ._text import plural
-from ._validate import Range, describe
+from ._validate import MAX_CUTBACKS, MAX_LOAD_STEPS, MAX_NEWTON_ITERATIONS, Range, count, describe
 from .errors import ParameterError
 
 __all__ = ["SolveOptions", "SolveReport", "MERITS"]
@@ -34,9 +34,10 @@ __all__ = ["SolveOptions", "SolveReport", "MERITS"]
 MERITS: dict[str, str] = {"standard": "energy", "mixed": "residual"}
 
 
-def _option(default: Any, doc: str, valid: Range, integer: bool = False) -> Any:
-    """A field of :class:`SolveOptions` with what the scene's ``[solver]`` table shows of it."""
-    return field(default=default, metadata={"doc": doc, "range": valid, "integer": integer})
+def _option(default: Any, doc: str, valid: Range, integer: bool = False, maximum: int | None = None) -> Any:
+    """A field of :class:`SolveOptions` with what the scene's ``[solver]`` table shows of it
+    (``maximum``: the documented limit of an integer option)."""
+    return field(default=default, metadata={"doc": doc, "range": valid, "integer": integer, "maximum": maximum})
 
 
 @dataclass(frozen=True)
@@ -48,11 +49,13 @@ class SolveOptions:
     tolerance
         Relative residual norm (residual over load norm) at which Newton stops, > 0.
     max_iterations
-        Newton iterations allowed per load step, >= 1.
+        Newton iterations allowed per load step, from 1 to 10000 (a documented limit).
     load_steps
-        Equal load increments, >= 1 (the solver may cut a step back).
+        Equal load increments, from 1 to 10000 (a documented limit; the solver may cut a step
+        back).
     max_cutbacks
-        How many times a failed load step may be halved before the solve gives up, >= 0.
+        How many times a failed load step may be halved before the solve gives up, from 0 to 60
+        (a documented limit).
 
     Raises
     ------
@@ -63,21 +66,21 @@ class SolveOptions:
     tolerance: float = _option(
         1e-8, "Newton stops when the residual norm over the load norm is below this", Range(gt=0)
     )
-    max_iterations: int = _option(50, "Newton iterations per load step", Range(ge=1), integer=True)
+    max_iterations: int = _option(50, "Newton iterations per load step", Range(ge=1), integer=True,
+                                  maximum=MAX_NEWTON_ITERATIONS)
     load_steps: int = _option(
-        1, "equal load increments (the solver may cut a step back)", Range(ge=1), integer=True
+        1, "equal load increments (the solver may cut a step back)", Range(ge=1), integer=True, maximum=MAX_LOAD_STEPS
     )
     max_cutbacks: int = _option(
-        8, "times a failed load step may be halved before the solve gives up", Range(ge=0), integer=True
+        8, "times a failed load step may be halved before the solve gives up", Range(ge=0), integer=True,
+        maximum=MAX_CUTBACKS,
     )
 
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
             if f.metadata["integer"]:
-                if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-                    raise ParameterError(f"{f.name}: expected an integer, got {describe(value)}", f.name)
-                value = int(value)
+                value = count(value, f.name, int(f.metadata["range"].ge), f.metadata["maximum"])
             else:
                 if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
                     raise ParameterError(f"{f.name}: expected a finite number, got {describe(value)}", f.name)

@@ -25,15 +25,97 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ._text import plural
-from ._validate import as_finite, describe, real
+from ._validate import MAX_LOAD_STEPS, MAX_MAGNITUDE, as_finite, describe, real
 from .body import Body
 from .cables import DEFAULT_ALPHA_STEP, MAX_HALVINGS, Cable, cable_index, check_actuation, placement_counts
-from .errors import ConvergenceError, InputError, ParameterError
+from .errors import ConvergenceError, InputError, ParameterError, SolverError
 from .io import result_mesh
 from .progress import Progress
 from .solver import SolveOptions, SolveReport
 
-__all__ = ["StaticResult", "solve_static", "actuate"]
+__all__ = ["StaticResult", "solve_static", "actuate", "check_magnitudes", "check_finite_solution"]
+
+
+def _norm(values: ArrayLike) -> float:
+    """The 2-norm without overflow in the squares (a norm above 1.8e308 is still inf)."""
+    arr = np.abs(np.asarray(values, dtype=np.float64)).reshape(-1)
+    top = float(arr.max(initial=0.0))
+    if top == 0.0 or not math.isfinite(top):
+        return top
+    with np.errstate(over="ignore"):
+        return top * float(np.linalg.norm(arr / top))
+
+
+def check_magnitudes(body: Body, gravity: ArrayLike) -> None:
+    """Refuse, before any work, loads and stiffnesses so large that the solver's residual norm
+    would overflow float64: the total load (nodal forces and weight, N), each modulus times
+    the mesh size (N), each cable stiffness times the mesh size (N) and the stiffness times
+    the largest prescribed displacement (N) must each be at most
+    :data:`~sorofem._validate.MAX_MAGNITUDE` (1e150).
+
+    Raises
+    ------
+    ParameterError
+        Naming the input (``gravity``, ``forces``, the material parameter, ``stiffness``,
+        ``displacement``), its value and the limit.
+    """
+    mesh = body.mesh
+    size = mesh.size
+    model = body.material.model
+    values = body.material.per_element(mesh.n_tets)
+    names = (*model.core_form.names, "density")
+
+    def refuse(name: str, what: str, value: float) -> None:
+        raise ParameterError(
+            f"{name}: {what} is {value:.3g}, above the limit {MAX_MAGNITUDE:g} (a documented limit: the solver's "
+            "residual norm would overflow float64); check the value and its units", name)
+
+    stiffness = 0.0
+    for name, value in zip(names[:-1], values[:-1]):
+        if model.parameter(name).units == "Pa":
+            scale = float(np.max(np.abs(value))) * size
+            stiffness = max(stiffness, scale)
+            if not scale <= MAX_MAGNITUDE:
+                refuse(name, "the modulus times the mesh size (N)", scale)
+    for k in body.cable_stiffnesses:
+        stiffness = max(stiffness, k * size)
+        if not k * size <= MAX_MAGNITUDE:
+            refuse("stiffness", "a cable's stiffness times the mesh size (N)", k * size)
+    weight = float(np.sum(values[-1] * mesh.volumes)) * _norm(gravity)
+    if not weight <= MAX_MAGNITUDE:
+        refuse("gravity", "the weight of the body (N)", weight)
+    forces = _norm(body.forces)
+    if not forces <= MAX_MAGNITUDE:
+        refuse("forces", "the norm of the nodal forces (N)", forces)
+    prescribed = float(np.max(np.abs(body.prescribed_displacement), initial=0.0)) / size * stiffness
+    if not prescribed <= MAX_MAGNITUDE:
+        refuse("displacement", "the stiffness times the largest prescribed displacement (N)", prescribed)
+
+
+#: What a solve returns besides its report, each checked for finite values.
+_RESULT_KEYS = ("positions", "pressure", "reactions", "cable_points", "cable_tensions", "velocities", "kinetic_energy")
+
+
+def check_finite_solution(
+    out: Mapping[str, Any], report: SolveReport | None, what: str = "the solve", keys: Sequence[str] = _RESULT_KEYS
+) -> None:
+    """Never a converged result with non-finite numbers: a residual norm that overflowed means
+    the input overflows (:class:`InputError`); positions, pressures, reactions or cable values
+    that are not finite mean the solve failed (:class:`SolverError`)."""
+    history = [] if report is None else report.residual_history
+    if report is not None and not (math.isfinite(report.reference_norm) and all(math.isfinite(r) for r in history)):
+        raise InputError(
+            f"{what}: the residual norm is not finite (reference norm {report.reference_norm:g} N): the loads or "
+            "stiffnesses overflow float64; reduce them (see the documented limit on magnitudes)"
+        )
+    for key in keys:
+        value = out.get(key)
+        if value is None:
+            continue
+        arrays = value if isinstance(value, (list, tuple)) else [value]
+        for arr in arrays:
+            if not np.all(np.isfinite(np.asarray(arr, dtype=np.float64))):
+                raise SolverError(f"{what} produced non-finite {key.replace('_', ' ')}; no result is returned")
 
 
 class StaticResult:
@@ -314,6 +396,7 @@ def solve_static(
         initial = initial.positions
     x0 = None if initial is None else as_finite(initial, "initial", (n, 3))
 
+    check_magnitudes(body, g)
     model = body.core_model()
     # The core solves in one call (the GIL released): the line can only show the elapsed time.
     with Progress(total=1, desc="static solve", unit="solve", enabled=progress) as bar:
@@ -324,13 +407,16 @@ def solve_static(
                 err.report = SolveReport.from_dict(err.report, body.formulation)
             raise
         report = SolveReport.from_dict(out, body.formulation)
+        check_finite_solution(out, report)
         bar.set(1, postfix=f"{plural(report.iterations, 'Newton iteration')}, {plural(report.load_steps, 'load step')}, "
                            f"{plural(report.cutbacks, 'cutback')}")
     positions = out["positions"]
+    fields = model.element_fields(positions)
+    check_finite_solution(fields, report, "the solve", keys=tuple(fields))
     return StaticResult(
         body, positions, out.get("pressure"), report, reactions=out.get("reactions"),
         cable_points=out.get("cable_points"), cable_tensions=out.get("cable_tensions"),
-        element_fields=model.element_fields(positions),
+        element_fields=fields,
     )
 
 
@@ -391,7 +477,11 @@ def actuate(
         target = check_actuation(alphas, "alphas")
         step = real(max_step, "max_step", minimum=0.0, strict=True)
         start = body.actuations[index]
-        n = max(1, math.ceil(abs(target - start) / step - 1e-12))
+        solves = abs(target - start) / step
+        if not solves <= MAX_LOAD_STEPS:
+            raise ParameterError(f"max_step: reaching alpha = {target:g} from {start:g} in steps of {step:g} takes "
+                                 f"{solves:.3g} solves, more than the documented limit {MAX_LOAD_STEPS}", "max_step")
+        n = max(1, math.ceil(solves - 1e-12))
         path = [start + (target - start) * (i + 1) / n for i in range(n)]
     else:
         try:

@@ -43,6 +43,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
+from ._validate import describe, positive_scalar
 from .errors import InputError, ShapeError
 from .io import Surface, read_surface
 from .mesh import Mesh
@@ -65,8 +66,11 @@ def _as_surface(value: Any, scale: float, name: str) -> Surface:
     if isinstance(value, (str, os.PathLike)):
         return read_surface(value, scale)
     if isinstance(value, tuple) and len(value) == 2:
-        v = np.asarray(value[0], dtype=np.float64)
-        f = np.asarray(value[1], dtype=np.int64)
+        try:
+            v = np.asarray(value[0], dtype=np.float64)
+            f = np.asarray(value[1], dtype=np.int64)
+        except (TypeError, ValueError, OverflowError):
+            raise ShapeError(f"{name}: expected (vertices (v, 3), faces (f, 3)), got {describe(value)}") from None
         if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3:
             raise ShapeError(f"{name}: expected (vertices (v, 3), faces (f, 3)), got shapes {v.shape}, {f.shape}")
         return Surface(v * float(scale), f)
@@ -106,7 +110,7 @@ def embed_points(mesh: Mesh, points: ArrayLike, outside: str = "error") -> tuple
     """
     from scipy.spatial import cKDTree
 
-    if outside not in ("error", "nearest"):
+    if not isinstance(outside, str) or outside not in ("error", "nearest"):
         raise InputError(f"outside: expected 'error' or 'nearest', got {outside!r}")
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3:
@@ -276,7 +280,10 @@ class Target:
     @classmethod
     def nodes(cls, node_ids: ArrayLike, positions: ArrayLike) -> "Target":
         """Goal positions ``(k, 3)`` (m) of mesh nodes ``node_ids`` ``(k,)``."""
-        ids = np.asarray(node_ids)
+        try:
+            ids = np.asarray(node_ids)
+        except (TypeError, ValueError, OverflowError):
+            raise ShapeError(f"node_ids: expected a 1-D integer array, got {describe(node_ids)}") from None
         if ids.ndim != 1 or not np.issubdtype(ids.dtype, np.integer):
             raise ShapeError(f"node_ids: expected a 1-D integer array, got shape {ids.shape} dtype {ids.dtype}")
         pos = _points_array(positions, "positions", len(ids))
@@ -322,8 +329,10 @@ class Target:
         --------
         >>> t = sf.Target.surface("hammer_target.obj", scale=0.01, rest="hammerbot_fine.obj")  # doctest: +SKIP
         """
-        if match not in ("auto", "vertices", "closest"):
-            raise InputError(f"match: expected 'auto', 'vertices' or 'closest', got {match!r}")
+        if not isinstance(match, str) or match not in ("auto", "vertices", "closest"):
+            raise InputError(f"match: expected 'auto', 'vertices' or 'closest', got {describe(match)}")
+        scale = positive_scalar(scale, "scale")
+        rest_scale = None if rest_scale is None else positive_scalar(rest_scale, "rest_scale")
         goal_surface = _as_surface(goal, scale, "goal")
         rest_surface = None if rest is None else _as_surface(rest, scale if rest_scale is None else rest_scale, "rest")
         return cls("surface", goal=goal_surface, rest=rest_surface, match=match, outside=outside)
@@ -376,7 +385,10 @@ class Target:
 
 
 def _points_array(value: ArrayLike, name: str, k: int | None) -> NDArray[np.float64]:
-    arr = np.asarray(value, dtype=np.float64)
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        raise ShapeError(f"{name}: expected points of shape (k, 3), got {describe(value)}") from None
     if arr.ndim == 1 and arr.size == 3:
         arr = arr.reshape(1, 3)
     if arr.ndim != 2 or arr.shape[1] != 3 or (k is not None and arr.shape[0] != k):

@@ -52,7 +52,7 @@ from __future__ import annotations
 
 from ._analysis import PROFILE_CONDITION
 from ._control import control
-from ._estimate import estimate
+from ._estimate import TornHistoryWarning, estimate
 from ._gradient import gradient
 from ._parameters import PARAMETERS, parameter_names
 from ._problem import DEFAULT_TOLERANCE
@@ -71,9 +71,10 @@ __all__ = [
     "ControlResult",
     "Uncertainty",
     "Profile",
+    "TornHistoryWarning",
 ]
 
 # Documented (and pickled) as members of this package, whichever private module holds them.
 for _public in (gradient, estimate, control, parameter_names, GradientResult, FitResult, ControlResult, Uncertainty,
-                Profile):
+                Profile, TornHistoryWarning):
     _public.__module__ = __name__

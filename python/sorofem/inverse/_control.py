@@ -6,8 +6,9 @@ import time
 from typing import Any, Sequence
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
+from .._validate import MAX_EVALUATIONS, boolean, count, describe, positive_scalar
 from ..errors import InputError
 from ..progress import Progress
 from ..solver import SolveOptions
@@ -18,6 +19,32 @@ from ._problem import scenarios as make_scenarios
 from .results import ControlResult
 
 __all__ = ["control"]
+
+
+def _alpha_bounds(bounds: Any, n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(lo, hi)`` alphas per controlled cable: finite, ``0 < lo <= hi``."""
+    if bounds is None:
+        return np.full(n, 0.3), np.full(n, 1.0)
+    try:
+        arr = np.asarray(bounds, dtype=np.float64)
+    except (TypeError, ValueError):
+        arr = np.zeros(0)
+    if arr.shape != (n, 2):
+        raise InputError(f"bounds: expected one (lo, hi) per controlled cable, shape ({n}, 2), got {describe(bounds)}")
+    lo, hi = arr[:, 0], arr[:, 1]
+    if not np.all(np.isfinite(arr) & (lo > 0) & (lo <= hi)):
+        raise InputError(f"bounds: expected finite 0 < lo <= hi for every cable, got {arr.tolist()}")
+    return lo, hi
+
+
+def _alphas(x0: Any, n: int) -> NDArray[np.float64]:
+    try:
+        theta0 = np.asarray(x0, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        theta0 = np.zeros(0)
+    if theta0.shape != (n,) or not np.all(np.isfinite(theta0) & (theta0 > 0)):
+        raise InputError(f"x0: expected {n} finite alphas > 0, got {describe(x0)}")
+    return theta0
 
 
 def control(
@@ -90,23 +117,20 @@ def control(
     ...                  gravity=(0, 0, -9.81))  # doctest: +SKIP
     >>> ctl.actuation, ctl.reachable, ctl.distance  # doctest: +SKIP
     """
-    if method not in ("l-bfgs-b", "nelder-mead"):
-        raise InputError(f"method: expected 'l-bfgs-b' or 'nelder-mead', got {method!r}")
+    if not isinstance(method, str) or method not in ("l-bfgs-b", "nelder-mead"):
+        raise InputError(f"method: expected 'l-bfgs-b' or 'nelder-mead', got {describe(method)}")
+    tolerance = positive_scalar(tolerance, "tolerance")
+    max_evaluations = count(max_evaluations, "max_evaluations", 1, MAX_EVALUATIONS)
+    xtol, ftol = positive_scalar(xtol, "xtol"), positive_scalar(ftol, "ftol")
+    verbose = boolean(verbose, "verbose")
+    if cables is not None and (isinstance(cables, (str, bytes)) or not isinstance(cables, Sequence)):
+        raise InputError(f"cables: expected a list of cables (sorofem.Cable or indices), got {describe(cables)}")
     t0 = time.perf_counter()
     p = Parameters(body, ["cable_actuation"], cables=cables)
     n = p.size
-    if bounds is None:
-        bounds = [(0.3, 1.0)] * n
-    if len(bounds) != n:
-        raise InputError(f"bounds: expected one (lo, hi) per controlled cable ({n}), got {len(bounds)}")
-    lo_a = np.array([b[0] for b in bounds], dtype=np.float64)
-    hi_a = np.array([b[1] for b in bounds], dtype=np.float64)
-    if not np.all((lo_a > 0) & (lo_a <= hi_a)):
-        raise InputError(f"bounds: expected 0 < lo <= hi for every cable, got {list(map(tuple, bounds))}")
+    lo_a, hi_a = _alpha_bounds(bounds, n)
     lo, hi = np.log(lo_a), np.log(hi_a)
-    theta0 = np.sqrt(lo_a * hi_a) if x0 is None else np.asarray(x0, dtype=np.float64).reshape(-1)
-    if theta0.shape != (n,) or not np.all(theta0 > 0):
-        raise InputError(f"x0: expected {n} alphas > 0, got {np.asarray(x0).tolist()}")
+    theta0 = np.sqrt(lo_a * hi_a) if x0 is None else _alphas(x0, n)
     solve = SolveOptions(solve_tolerance, max_iterations, load_steps) if options is None else options
     scs = make_scenarios(body, target, None if initial is None else [{"initial": initial}], gravity, solve)
     problem = Problem(body, p, scs)

@@ -6,13 +6,17 @@ import json
 import math
 import os
 import time
+import warnings
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .._files import check_path, write_text
+from .._validate import MAX_EVALUATIONS, MAX_STARTS, boolean, count, describe, non_negative, positive_scalar
 from ..errors import InputError
+from ..io import json_text
 from ..progress import Progress
 from ..solver import SolveOptions
 from ._analysis import PROFILE_CONDITION, PROFILE_SPAN, material_std, profile_index, profile_span
@@ -23,39 +27,113 @@ from ._problem import DEFAULT_TOLERANCE, Problem, final_results, fitted_material
 from ._problem import scenarios as make_scenarios
 from .results import FitResult
 
-__all__ = ["estimate"]
+__all__ = ["estimate", "TornHistoryWarning", "HISTORY_VERSION"]
 
 
-def _read_history(path: Path, names: list[str]) -> list[dict[str, Any]]:
-    entries = []
-    for line_no, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
-        if not line.strip():
-            continue
+#: Version of the history file format (its first line, the header, says which).
+HISTORY_VERSION = 1
+
+
+class TornHistoryWarning(UserWarning):
+    """A history file ended in a partial record (a run killed while writing it); the record was
+    ignored and cut off, so that the resumed run appends whole lines."""
+
+
+def _history_file(value: Any) -> Path:
+    path = check_path(value, "history_path")
+    if path.is_dir():
+        raise InputError(f"history_path: {path} is a folder; expected a file name such as {path / 'history.jsonl'}")
+    if not path.parent.is_dir():
+        raise InputError(f"history_path: the folder {path.parent} of {path.name} does not exist")
+    return path
+
+
+def _read_history(path: Path, names: list[str]) -> tuple[dict[str, Any] | None, list[dict[str, Any]]]:
+    """The header (None in a file of an older sorofem) and the records of a history file. A
+    partial last line (a write cut short) is ignored, cut off the file and reported with a
+    :class:`TornHistoryWarning`; anything else malformed is an :class:`InputError` naming the
+    file and line."""
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise InputError(f"history_path: cannot read {path}: {exc.strerror or exc}") from None
+    complete = data.rfind(b"\n") + 1
+    tail = data[complete:]
+    lines = data[:complete].split(b"\n")[:-1]
+    if not tail.strip() and lines:
         try:
-            entry = json.loads(line)
-        except json.JSONDecodeError:
-            continue  # a line cut short by an interruption
-        if sorted(entry.get("params", {})) != sorted(names):
-            raise InputError(f"history_path: {path}:{line_no} has parameters {sorted(entry.get('params', {}))}, not {sorted(names)}")
-        entries.append(entry)
-    return entries
+            json.loads(lines[-1])
+        except ValueError:
+            tail, complete, lines = lines[-1] + b"\n", complete - len(lines[-1]) - 1, lines[:-1]
+    if tail.strip():
+        warnings.warn(
+            f"history_path: {path} ends in a partial record ({len(tail)} bytes, a write interrupted by a crash); "
+            "it is ignored and cut off",
+            TornHistoryWarning,
+            stacklevel=3,
+        )
+        with path.open("r+b") as fh:
+            fh.truncate(complete)
+    header, records = None, []
+    for line_no, raw in enumerate(lines, 1):
+        if not raw.strip():
+            continue
+        where = f"history_path: {path}:{line_no}"
+        try:
+            entry = json.loads(raw)
+        except ValueError:
+            raise InputError(f"{where}: not a JSON record (the file is damaged, or not a history of sorofem.estimate)") from None
+        if not isinstance(entry, dict):
+            raise InputError(f"{where}: expected a JSON object, got {type(entry).__name__}")
+        if entry.get("kind") == "header":
+            header = entry
+            continue
+        params = entry.get("params")
+        if not isinstance(params, dict) or sorted(params) != sorted(names):
+            shown = sorted(params) if isinstance(params, dict) else describe(params)
+            raise InputError(f"{where} has parameters {shown}, not {sorted(names)}")
+        loss, start = entry.get("loss"), entry.get("start", 0)
+        if not (loss is None or (isinstance(loss, (int, float)) and not isinstance(loss, bool))):
+            raise InputError(f"{where}: 'loss' must be a number, got {describe(loss)}")
+        if isinstance(start, bool) or not isinstance(start, int) or start < 0:
+            raise InputError(f"{where}: 'start' must be an integer >= 0, got {describe(start)}")
+        records.append(entry)
+    return header, records
+
+
+def _finite_loss(entry: Mapping[str, Any]) -> float:
+    loss = entry.get("loss")
+    return float(loss) if isinstance(loss, (int, float)) and math.isfinite(loss) else math.inf
 
 
 def _fit_from(problem: Problem, p: Parameters, theta_start: Any, method: str, lo: Any, hi: Any, record: Recorder,
-              max_evaluations: int, xtol: float, ftol: float) -> dict[str, Any]:
-    """One start of a fit: its optimum, residual, Jacobian (least squares) and history."""
+              max_evaluations: int, xtol: float, ftol: float,
+              previous: list[dict[str, Any]] | None = None) -> dict[str, Any]:
+    """One start of a fit: its optimum, residual, Jacobian (least squares) and history; with the
+    ``previous`` iterates of an interrupted run of this start, it goes on from the last one."""
     for sc in problem.scenarios:  # every start from the same beginning
         sc.initial = sc.given_initial
     solves_before, iterations_before = problem.forward_solves, problem.newton_iterations
-    s0 = np.clip(p.to_s(theta_start), lo, hi)
+    s0 = np.clip(p.to_s(theta_start if not previous else p.from_user(previous[-1]["params"], "history")), lo, hi)
     if method == "least-squares":
-        s, r, J, iters, ok, msg = levenberg_marquardt(problem, s0, lo, hi, record, max_evaluations, xtol, ftol)
+        state = previous[-1].get("optimizer") if previous else None
+        s, r, J, iters, ok, msg = levenberg_marquardt(
+            problem, s0, lo, hi, record, max_evaluations, xtol, ftol, state if isinstance(state, dict) else None)
     else:
         s, iters, ok, msg = scipy_minimize(problem, s0, lo, hi, record, method, max_evaluations, xtol, ftol)
         r, J = None, None
+    loss = _finite_loss(record.entries[-1]) if record.entries else math.inf
     return {"start": theta_start, "s": s, "r": r, "J": J, "iterations": iters, "converged": ok, "message": msg,
-            "history": record.entries, "forward_solves": problem.forward_solves - solves_before,
+            "history": record.entries, "loss": loss, "forward_solves": problem.forward_solves - solves_before,
             "newton_iterations": problem.newton_iterations - iterations_before}
+
+
+def _end_record(start: int, run: Mapping[str, Any], p: Parameters) -> dict[str, Any]:
+    """The history line that closes a start (what ``resume`` needs to skip it)."""
+    return {"kind": "end", "start": start,
+            "params": run["history"][-1]["params"] if run["history"] else p.as_dict(p.from_s(run["s"])),
+            "loss": run["loss"], "iterations": run["iterations"], "converged": run["converged"],
+            "message": run["message"], "forward_solves": run["forward_solves"]}
 
 
 def _start_on_worker(k: int, theta_start: Any, setup: tuple[Any, ...]) -> dict[str, Any]:
@@ -88,6 +166,7 @@ def _remote_starts(client: Any, start_points: list[Any], first_start: int, histo
         if history_file is not None:
             with history_file.open("a", encoding="utf-8") as fh:
                 fh.writelines(json.dumps(entry) + "\n" for entry in run["history"])
+                fh.write(json.dumps(_end_record(first_start + k, run, problem.params)) + "\n")
         bar.set(problem.forward_solves, postfix=f"start {k + 1}/{len(start_points)} done")
         runs.append(run)
     return runs
@@ -148,8 +227,8 @@ def estimate(
         values only.
     starts
         More starting points: a list of x0-like values, or a number of random starts drawn
-        log-uniformly within ``bounds`` (or within a factor 3 of ``x0``), ``seed`` seeding it.
-        The best run wins; all are reported in ``fit.starts``.
+        log-uniformly within ``bounds`` (or within a factor 3 of ``x0``), ``seed`` seeding it;
+        at most 1,000 (a documented limit). The best run wins; all are reported in ``fit.starts``.
     scenarios
         Several load cases fitted jointly: dicts with any of ``gravity``, ``actuation`` (one
         alpha per cable, or a dict cable -> alpha), ``target``, ``tolerance``,
@@ -173,7 +252,8 @@ def estimate(
         each worker builds); the final evaluation runs here. ``verbose`` lines are not
         printed for remote starts; the history file is written here as starts finish.
     max_evaluations
-        Budget of objective evaluations per start (each is one solve per scenario).
+        Budget of objective evaluations per start (each is one solve per scenario), from 1 to
+        100,000 (a documented limit).
     xtol, ftol
         Stop when a step changes log-parameters by less than ``xtol`` (relative), or the loss
         decreases by less than ``ftol`` relative (Nelder-Mead: simplex size and spread of the
@@ -181,9 +261,20 @@ def estimate(
     verbose
         Print one line per iteration on stderr.
     history_path
-        Append each iteration as a JSON line here, as it goes.
+        Write the run's history here as it goes, one JSON line per record, each flushed to the
+        disk before the next evaluation (:func:`sorofem.io.append_line`): a header (the
+        parameters, the method and every starting point), one line per accepted iterate
+        (with Levenberg-Marquardt's damping) and one line when a start ends. Without
+        ``resume`` an existing file is replaced.
     resume
-        Read ``history_path`` and start from its best point (no extra starts).
+        Go on with the run recorded in ``history_path`` (interrupted by Ctrl-C, a crash or
+        SIGKILL): its starting points come from the file (``x0`` and ``starts`` are then
+        ignored), finished starts are not run again, and the start that was running goes on
+        from its last recorded iterate; least-squares also restores its damping, so it takes
+        the steps the uninterrupted run would have (to the solver tolerance), while
+        l-bfgs-b and nelder-mead restart from that iterate. A partial last line (a write cut
+        short) is ignored, cut off and reported with a :class:`TornHistoryWarning`. A file
+        written by an older sorofem (no header) restarts from its best point.
     progress
         A progress line on stderr, ticked after every forward solve, with the iteration, the
         loss and the RMS misfit: ``None`` (default) only when stderr is a terminal and the fit
@@ -210,7 +301,10 @@ def estimate(
     Raises
     ------
     InputError
-        Unknown parameter or method, bad bounds or scenarios.
+        Unknown parameter or method, bad bounds or scenarios, ``x0`` naming a parameter not
+        being fitted, a history file that cannot be resumed (the message names file and line).
+    ParameterError
+        A count or tolerance out of range (``starts``, ``max_evaluations``, ``xtol``, ...).
     ConvergenceError
         The very first equilibrium cannot be found.
 
@@ -223,6 +317,18 @@ def estimate(
     methods = ("least-squares", "l-bfgs-b", "nelder-mead")
     if method not in methods:
         raise InputError(f"method: expected one of {list(methods)}, got {method!r}")
+    max_evaluations = count(max_evaluations, "max_evaluations", 1, MAX_EVALUATIONS)
+    xtol, ftol = positive_scalar(xtol, "xtol"), positive_scalar(ftol, "ftol")
+    regularization = non_negative(regularization, "regularization")
+    seed = count(seed, "seed", 0, 2**63 - 1)
+    verbose, resume = boolean(verbose, "verbose"), boolean(resume, "resume")
+    if starts is not None and not isinstance(starts, (list, tuple)):
+        starts = count(starts, "starts", 0, MAX_STARTS)
+    elif starts is not None and len(starts) > MAX_STARTS:
+        raise InputError(f"starts: expected at most {MAX_STARTS} starting points (a documented limit), got {len(starts)}")
+    history_file = None if history_path is None else _history_file(history_path)
+    if resume and (history_file is None or not history_file.is_file()):
+        raise InputError(f"resume: needs an existing history_path, got {history_path!r}")
     t0 = time.perf_counter()
     p = Parameters(body, params, regions)
     if any(b.kind == "gravity" for b in p.blocks):
@@ -234,18 +340,19 @@ def estimate(
 
     theta0 = p.current() if x0 is None else p.from_user(x0, "x0")
     p.check(theta0, "x0")
-    history_file = None if history_path is None else Path(history_path)
-    if resume:
-        if history_file is None or not history_file.is_file():
-            raise InputError(f"resume: needs an existing history_path, got {history_path!r}")
-        entries = [e for e in _read_history(history_file, p.names) if math.isfinite(e.get("loss", math.nan))]
+    header, records = _read_history(history_file, p.names) if resume and history_file is not None else (None, [])
+    if header is not None:
+        # The file's run goes on: its starting points, its finished starts, its last iterate.
+        if header.get("method") != method:
+            raise InputError(f"resume: {history_file} is a history of method {header.get('method')!r}, not {method!r}")
+        start_points = [p.from_user(v, f"history start {k}") for k, v in enumerate(header.get("starts", []))]
+    elif resume:
+        # A history without a header (older sorofem): start again from its best point.
+        entries = [e for e in records if math.isfinite(_finite_loss(e))]
         if entries:
-            best = min(entries, key=lambda e: e["loss"])
-            theta0 = p.from_user(best["params"], "history")
-        first_start = 1 + max((int(e.get("start", 0)) for e in entries), default=-1)
+            theta0 = p.from_user(min(entries, key=_finite_loss)["params"], "history")
         start_points = [theta0]
     else:
-        first_start = 0
         start_points = [theta0]
         if isinstance(starts, int):
             rng = np.random.default_rng(seed)
@@ -255,6 +362,14 @@ def estimate(
             start_points += [p.from_s(rng.uniform(a, b)) for _ in range(starts)]
         elif starts is not None:
             start_points += [p.from_user(v, f"starts[{i}]") for i, v in enumerate(starts)]
+    first_start = 0 if header is not None or not resume else 1 + max((int(e.get("start", 0)) for e in records), default=-1)
+    if history_file is not None and not resume:
+        header = {"kind": "header", "version": HISTORY_VERSION, "params": p.names, "method": method,
+                  "starts": [p.as_dict(theta) for theta in start_points]}
+        write_text(history_file, json_text(header, indent=None) + "\n")
+    ended = {int(e["start"]): e for e in records if e.get("kind") == "end"} if header is not None else {}
+    done_before = {k: [e for e in records if e.get("kind", "iteration") == "iteration" and e.get("start") == k]
+                   for k in range(len(start_points))} if header is not None else {}
 
     runs: list[dict[str, Any]] = []
     bar = Progress(desc=f"estimate ({method})", unit="solves", enabled=progress)
@@ -267,11 +382,22 @@ def estimate(
         else:
             for k, theta_start in enumerate(start_points):
                 p.check(theta_start, f"start {k}")
+                previous = done_before.get(k, [])
+                if k in ended:
+                    end = ended[k]
+                    runs.append({"start": theta_start, "s": p.to_s(p.from_user(end["params"], "history")), "r": None,
+                                 "J": None, "iterations": int(end.get("iterations", 0)),
+                                 "converged": bool(end.get("converged")), "message": str(end.get("message", "")),
+                                 "history": previous, "loss": _finite_loss(end),
+                                 "forward_solves": int(end.get("forward_solves", 0))})
+                    continue
                 if len(start_points) > 1:
                     bar.desc = f"estimate ({method}) start {k + 1}/{len(start_points)}"
-                record = Recorder(problem, verbose, history_file, first_start + k, t0)
-                runs.append(_fit_from(problem, p, theta_start, method, lo, hi, record, max_evaluations, xtol, ftol))
-        best = min(runs, key=lambda run: run["history"][-1]["loss"] if run["history"] and math.isfinite(run["history"][-1]["loss"]) else math.inf)
+                record = Recorder(problem, verbose, history_file, first_start + k, t0, previous)
+                run = _fit_from(problem, p, theta_start, method, lo, hi, record, max_evaluations, xtol, ftol, previous)
+                record.write(_end_record(first_start + k, run, p))
+                runs.append(run)
+        best = min(runs, key=lambda run: run["loss"])
         # Final evaluation at the optimum: residual and the Jacobian for the uncertainty.
         s = best["s"]
         fields = any(b.is_field for b in p.blocks)
@@ -318,8 +444,7 @@ def estimate(
         profile=fit_profile,
         targets=[(sc.name, sc.target) for sc in scs],
         starts=[
-            {"x0": p.as_dict(run["start"]), "params": p.as_dict(p.from_s(run["s"])),
-             "loss": run["history"][-1]["loss"] if run["history"] else math.nan,
+            {"x0": p.as_dict(run["start"]), "params": p.as_dict(p.from_s(run["s"])), "loss": run["loss"],
              "forward_solves": run["forward_solves"], "iterations": run["iterations"], "converged": run["converged"]}
             for run in runs
         ],

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import math
+import numbers
 from typing import Any, Mapping, Sequence
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
+from .._validate import describe
 from ..errors import InputError
 from ..solver import SolveOptions
 from ..static import solve_static
@@ -16,6 +19,29 @@ from ._problem import DEFAULT_TOLERANCE, bind
 from .results import GradientResult
 
 __all__ = ["gradient"]
+
+
+def _call_objective(objective: Any, positions: NDArray[np.float64]) -> tuple[float, NDArray[np.float64]]:
+    """``objective(positions)`` checked: a finite value and a finite ``(n, 3)`` derivative; what
+    the user's function raises or returns wrongly becomes an :class:`InputError` naming it."""
+    n = len(positions)
+    try:
+        out = objective(positions.copy())
+    except Exception as exc:  # noqa: BLE001 - the user's code may raise anything
+        raise InputError(f"objective: the callable raised {type(exc).__name__}: {exc}") from None
+    if not isinstance(out, (tuple, list)) or len(out) != 2:
+        raise InputError(f"objective: expected the callable to return (value, d value / d positions), got {describe(out)}")
+    value, dx = out
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(float(value)):
+        raise InputError(f"objective: expected a finite number as the value, got {describe(value)}")
+    try:
+        arr = np.asarray(dx, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"objective: expected the derivative as an array of shape ({n}, 3), got {describe(dx)}") from None
+    if arr.shape != (n, 3) or not np.all(np.isfinite(arr)):
+        what = f"shape {arr.shape}" if arr.shape != (n, 3) else "non-finite values"
+        raise InputError(f"objective: expected the derivative as finite values of shape ({n}, 3), got {what}")
+    return float(value), arr
 
 
 def gradient(
@@ -67,8 +93,7 @@ def gradient(
     if isinstance(objective, (Target, BoundTarget)):
         value, dx = bind(objective, body.mesh).misfit(result.positions)
     elif callable(objective):
-        value, dx = objective(result.positions)
-        dx = np.asarray(dx, dtype=np.float64).reshape(body.mesh.n_nodes, 3)
+        value, dx = _call_objective(objective, result.positions)
     else:
         raise InputError(f"objective: expected a Target or a callable, got {type(objective).__name__}")
     # solve_static just left the model at this equilibrium with the body's own parameters.

@@ -14,7 +14,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .._files import append_line
 from ..errors import SolverError
+from ..io import json_text
 from ._problem import Problem
 from .results import Uncertainty
 
@@ -22,16 +24,28 @@ __all__ = ["Recorder", "levenberg_marquardt", "scipy_minimize", "uncertainty", "
 
 
 class Recorder:
-    """History of one run: kept in memory, printed when verbose, appended to a JSON-lines file."""
+    """History of one run: kept in memory, printed when verbose, appended to a JSON-lines file
+    (one durable line per accepted iterate, :func:`sorofem.io.append_line`)."""
 
-    def __init__(self, problem: Problem, verbose: bool, path: Path | None, start: int, t0: float) -> None:
+    def __init__(self, problem: Problem, verbose: bool, path: Path | None, start: int, t0: float,
+                 previous: list[dict[str, Any]] | None = None) -> None:
         self.problem, self.verbose, self.path, self.start, self.t0 = problem, verbose, path, start, t0
-        self.entries: list[dict[str, Any]] = []
+        #: This start's records, those of an interrupted run it resumes first.
+        self.entries: list[dict[str, Any]] = list(previous or [])
+        #: Loss and RMS misfit of the points evaluated lately, by the bytes of s: the optimiser's
+        #: callback names a point, the value comes from here (never NaN).
+        self.evaluated: dict[bytes, tuple[float, float]] = {}
 
-    def __call__(self, s: NDArray[np.float64], loss: float, rms: float) -> None:
+    def remember(self, s: NDArray[np.float64], loss: float, rms: float) -> None:
+        if len(self.evaluated) > 256:
+            self.evaluated.pop(next(iter(self.evaluated)))
+        self.evaluated[np.asarray(s, dtype=np.float64).tobytes()] = (float(loss), float(rms))
+
+    def __call__(self, s: NDArray[np.float64], loss: float, rms: float, state: dict[str, Any] | None = None) -> None:
         p = self.problem.params
         values = p.as_dict(p.from_s(s))
         entry = {
+            "kind": "iteration",
             "start": self.start,
             "iteration": len(self.entries),
             "params": {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in values.items()},
@@ -39,6 +53,7 @@ class Recorder:
             "rms": float(rms),
             "forward_solves": self.problem.forward_solves,
             "time": time.perf_counter() - self.t0,
+            **({"optimizer": state} if state else {}),
         }
         self.entries.append(entry)
         bar = self.problem.progress
@@ -60,9 +75,12 @@ class Recorder:
                 bar.print(line)  # above the progress line
             else:
                 print(line, file=sys.stderr, flush=True)
+        self.write(entry)
+
+    def write(self, record: dict[str, Any]) -> None:
+        """Append ``record`` to the history file (if any), durably."""
         if self.path is not None:
-            with self.path.open("a", encoding="utf-8") as fh:
-                fh.write(json.dumps(entry) + "\n")
+            append_line(self.path, json_text(record, indent=None))
 
 
 def levenberg_marquardt(
@@ -74,16 +92,25 @@ def levenberg_marquardt(
     max_evaluations: int,
     xtol: float,
     ftol: float,
+    resume: dict[str, Any] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], int, bool, str]:
     """Levenberg-Marquardt in s with Marquardt's diagonal scaling and Nielsen's damping
     update; each evaluation is one static solve per scenario plus its sensitivities. Bounds
-    by projection. Returns (s, r, J, iterations, converged, message)."""
+    by projection. Returns (s, r, J, iterations, converged, message).
+
+    ``resume``: the ``optimizer`` state of the last recorded iterate of an interrupted run
+    (``damping``, ``grow``, ``evaluations``, ``iterations``), to go on from ``s0`` as that run
+    would have; ``s0`` is then not recorded again."""
     s = np.clip(s0, lo, hi)
     r, J = problem.evaluate(s, "jacobian")
     cost = 0.5 * r @ r
-    record(s, cost, problem.rms(r))
     damping, grow = 1e-3, 2.0
     evaluations, iterations = 1, 0
+    if resume:
+        damping, grow = float(resume["damping"]), float(resume["grow"])
+        evaluations, iterations = int(resume["evaluations"]), int(resume["iterations"])
+    else:
+        record(s, cost, problem.rms(r), _lm_state(damping, grow, evaluations, iterations))
     while True:
         A = J.T @ J
         g = J.T @ r
@@ -119,14 +146,18 @@ def levenberg_marquardt(
             reduction = cost - cost_new
             s, r, J, cost = s_new, r_new, J_new, cost_new
             iterations += 1
-            record(s, cost, problem.rms(r))
             damping *= max(1.0 / 3.0, 1.0 - (2.0 * ratio - 1.0) ** 3)
             grow = 2.0
+            record(s, cost, problem.rms(r), _lm_state(damping, grow, evaluations, iterations))
             if reduction <= ftol * (cost + reduction):
                 return s, r, J, iterations, True, f"relative loss decrease below ftol = {ftol:g}"
         else:
             damping *= grow
             grow *= 2.0
+
+
+def _lm_state(damping: float, grow: float, evaluations: int, iterations: int) -> dict[str, Any]:
+    return {"damping": damping, "grow": grow, "evaluations": evaluations, "iterations": iterations}
 
 
 def scipy_minimize(
@@ -145,8 +176,8 @@ def scipy_minimize(
 
     r0, _ = problem.evaluate(s0, "residual")
     scale = max(0.5 * r0 @ r0, 1e-300)
-    last: dict[str, Any] = {"s": s0.copy(), "loss": 0.5 * r0 @ r0, "rms": problem.rms(r0)}
-    record(s0, last["loss"], last["rms"])
+    record.remember(s0, 0.5 * r0 @ r0, problem.rms(r0))
+    record(s0, 0.5 * r0 @ r0, problem.rms(r0))
     gradient_based = method == "l-bfgs-b"
 
     def fun(s: NDArray[np.float64]) -> Any:
@@ -155,14 +186,16 @@ def scipy_minimize(
         except SolverError:
             return (1e10, np.zeros_like(s)) if gradient_based else 1e10
         loss = 0.5 * r @ r
-        last.update(s=np.array(s), loss=loss, rms=problem.rms(r))
+        record.remember(s, loss, problem.rms(r))
         return (loss / scale, g / scale) if gradient_based else loss / scale
 
     def callback(xk: NDArray[np.float64], *args: Any) -> None:
-        if np.array_equal(xk, last["s"]):
-            record(xk, last["loss"], last["rms"])
-        else:
-            record(xk, math.nan, math.nan)
+        # The optimisers report points they evaluated (Nelder-Mead: the best vertex).
+        known = record.evaluated.get(np.asarray(xk, dtype=np.float64).tobytes())
+        if known is None:
+            r, _ = problem.evaluate(np.asarray(xk, dtype=np.float64), "residual")
+            known = (0.5 * float(r @ r), problem.rms(r))
+        record(xk, *known)
 
     bounds = list(zip(np.where(np.isfinite(lo), lo, None), np.where(np.isfinite(hi), hi, None)))
     if gradient_based:

@@ -9,6 +9,7 @@ and their transforms (log, logit) come from the body's material model declaratio
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
@@ -16,6 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..cables import cable_index
+from .._validate import describe
 from ..errors import InputError, ParameterError
 from ..materials import IDENTITY, LOG, NEO_HOOKEAN, Form, MaterialModel, Transform
 
@@ -97,8 +99,8 @@ class Parameters:
     ) -> None:
         if isinstance(names, str):
             names = [names]
-        if not names:
-            raise InputError("params: expected at least one parameter name")
+        if not isinstance(names, (list, tuple)) or not names:
+            raise InputError(f"params: expected a list of parameter names, got {describe(names)}")
         model: MaterialModel = body.material.model
         known = parameter_names(model)
         material_names = set(model.estimable())
@@ -191,21 +193,38 @@ class Parameters:
         """theta from a user's list (one entry per name; arrays for fields, gravity, cables)
         or dict name -> value."""
         if isinstance(values, Mapping):
+            unknown = [k for k in values if k not in self.names]
+            if unknown:
+                raise InputError(f"{what}: {unknown} are not parameters being fitted; expected names among {self.names}")
             values = [values[b.name] if b.name in values else self.current()[b.slice] for b in self.blocks]
-        values = list(np.atleast_1d(np.asarray(values, dtype=object))) if np.ndim(values) <= 1 else list(values)
+        if isinstance(values, np.ndarray):
+            values = list(values.reshape(-1)) if values.ndim <= 1 and values.size != len(self.blocks) else list(values)
+        elif np.isscalar(values) or values is None:
+            values = [values]
+        elif not isinstance(values, (list, tuple)):
+            raise InputError(f"{what}: expected one value per parameter {self.names}, got {describe(values)}")
+        values = list(values)
         if len(values) != len(self.blocks):
             # A flat vector of the full size is accepted too.
-            flat = np.asarray(values, dtype=np.float64).reshape(-1)
-            if flat.size == self.size:
+            try:
+                flat = np.asarray(values, dtype=np.float64).reshape(-1)
+            except (TypeError, ValueError):
+                flat = np.zeros(0)
+            if flat.size == self.size and len(values) == self.size:
                 return flat
             raise InputError(f"{what}: expected {len(self.blocks)} value(s), one per parameter {self.names}, got {len(values)}")
         theta = np.zeros(self.size)
         for b, v in zip(self.blocks, values):
-            arr = np.asarray(v, dtype=np.float64).reshape(-1)
+            try:
+                arr = np.asarray(v, dtype=np.float64).reshape(-1)
+            except (TypeError, ValueError):
+                raise InputError(f"{what}: {b.name!r} expects {'a number' if b.size == 1 else f'{b.size} numbers'}, "
+                                 f"got {describe(v)}") from None
             if arr.size == 1:
                 arr = np.full(b.size, float(arr[0]))
             if arr.size != b.size:
-                raise InputError(f"{what}: {b.name!r} expects {b.size} value(s), got {arr.size}")
+                kind = "a scalar parameter: one number" if b.size == 1 else f"{b.size} value(s)"
+                raise InputError(f"{what}: {b.name!r} is {kind}, got {arr.size} values")
             theta[b.slice] = arr
         return theta
 
@@ -339,15 +358,25 @@ class Parameters:
         if bounds is None:
             return lo, hi
         if isinstance(bounds, Mapping):
+            unknown = [k for k in bounds if k not in self.names]
+            if unknown:
+                raise InputError(f"bounds: {unknown} are not parameters being fitted; expected names among {self.names}")
             bounds = [bounds.get(name) for name in self.names]
-        if len(bounds) != len(self.blocks):
-            raise InputError(f"bounds: expected one (lo, hi) per parameter {self.names}, got {len(bounds)}")
+        if not isinstance(bounds, (list, tuple, np.ndarray)) or len(bounds) != len(self.blocks):
+            raise InputError(f"bounds: expected one (lo, hi) per parameter {self.names}, got {describe(bounds)}")
         for b, pair in zip(self.blocks, bounds):
             if pair is None:
                 continue
+            if not isinstance(pair, (list, tuple, np.ndarray)) or len(pair) != 2:
+                raise InputError(f"bounds: expected (lo, hi) for {b.name!r}, got {describe(pair)}")
             a, c = pair
             for value, target in ((a, lo), (c, hi)):
-                if value is None or not b.transform.contains(value):
+                if value is None:
+                    continue
+                if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+                        or math.isnan(float(value)):
+                    raise InputError(f"bounds: expected numbers or None for {b.name!r}, got {describe(value)}")
+                if not b.transform.contains(value):
                     continue
                 target[b.slice] = b.transform.to_s(np.full(b.size, float(value)))
         if np.any(lo > hi):

@@ -254,5 +254,14 @@ def final_results(body: Any, material: Material, st: State, scs: list[Scenario],
             fitted.set_actuation(c, float(alpha[c]))
             fitted.set_cable_stiffness(c, float(st.stiffness[c]))
         g = sc.gravity if st.gravity is None else st.gravity
-        results.append(solve_static(fitted, g, options=sc.solve, initial=sc.initial))
+        # The last warm start may be a rejected trial's equilibrium, far from this one: fall back
+        # as the evaluations do (from rest, then in more load steps).
+        attempts = [(sc.initial, sc.solve), (None, sc.solve), (None, sc.solve.replace(load_steps=4 * sc.solve.load_steps))]
+        for k, (initial, options) in enumerate(attempts):
+            try:
+                results.append(solve_static(fitted, g, options=options, initial=initial))
+                break
+            except SolverError:
+                if k == len(attempts) - 1:
+                    raise
     return results

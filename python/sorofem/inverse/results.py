@@ -15,7 +15,11 @@ from .._text import plural
 from ..fitting import format_uncertain
 from ..materials import Material
 
-__all__ = ["GradientResult", "Uncertainty", "Profile", "FitResult", "ControlResult"]
+__all__ = ["GradientResult", "Uncertainty", "Profile", "FitResult", "ControlResult", "NOT_IDENTIFIABLE"]
+
+#: What :meth:`Uncertainty.to_dict` (and ``summary.json``) says for a standard deviation the
+#: data do not bound.
+NOT_IDENTIFIABLE = "not identifiable"
 
 
 @dataclass
@@ -104,17 +108,28 @@ class Uncertainty:
     material_std: dict[str, float] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
+        """Plain data for JSON: a standard deviation the data do not bound (infinite, or undefined)
+        is the string ``"not identifiable"``, an infinite condition number ``"infinite"``; that
+        of a parameter held at a bound stays NaN (``null`` in ``summary.json``; ``at_bound``
+        says which bound)."""
+
+        def bounded(values: NDArray[np.float64]) -> dict[str, Any]:
+            return {n: float(v) if np.isfinite(v) or self.at_bound.get(n) else NOT_IDENTIFIABLE
+                    for n, v in zip(self.names, values)}
+
         return {
-            "sigma": self.sigma,
-            "std": dict(zip(self.names, map(float, self.std))),
-            "relative_std": dict(zip(self.names, map(float, self.relative_std))),
-            "correlation": self.correlation.tolist(),
+            "sigma": float(self.sigma) if np.isfinite(self.sigma) else NOT_IDENTIFIABLE,
+            "std": bounded(self.std),
+            "relative_std": bounded(self.relative_std),
+            "correlation": np.nan_to_num(self.correlation, nan=0.0, posinf=0.0, neginf=0.0).tolist(),
             "singular_values": self.singular_values.tolist(),
-            "condition": self.condition,
-            "identifiable": self.identifiable,
+            "condition": float(self.condition) if np.isfinite(self.condition) else "infinite",
+            "identifiable": {n: bool(self.identifiable.get(n, False)) and bool(np.isfinite(s))
+                             for n, s in zip(self.names, self.std)},
             "at_bound": self.at_bound,
             "weak_direction": None if self.weak_direction is None else dict(zip(self.names, map(float, self.weak_direction))),
-            "material_std": dict(self.material_std),
+            "material_std": {k: float(v) if np.isfinite(v) else NOT_IDENTIFIABLE
+                             for k, v in dict(self.material_std).items()},
         }
 
 

@@ -112,7 +112,7 @@ def model(name: str) -> MaterialModel:
     ParameterError
         No such model.
     """
-    if name not in MODELS:
+    if not isinstance(name, str) or name not in MODELS:
         raise ParameterError(f"model: expected one of {list(MODELS)}, got {name!r}", "model")
     return MODELS[name]
 
@@ -125,7 +125,7 @@ def material_class(name: str) -> type[Material]:
     ParameterError
         No such model.
     """
-    if name not in CLASSES:
+    if not isinstance(name, str) or name not in CLASSES:
         raise ParameterError(f"model: expected one of {list(CLASSES)}, got {name!r}", "model")
     return CLASSES[name]
 

@@ -295,6 +295,8 @@ def _material_value(value: Any, name: str) -> float | NDArray[np.float64]:
         raise ParameterError(
             f"{name}: expected a number or a per-element array of shape (n_tets,): {exc}", name
         ) from None
+    if arr.size == 0:
+        raise ParameterError(f"{name}: expected a number or a per-element array, got an empty array", name)
     if not np.all(np.isfinite(arr)):
         raise ParameterError(f"{name}: expected finite values, got {arr[~np.isfinite(arr)][0]}", name)
     arr.setflags(write=False)

@@ -9,6 +9,8 @@ from typing import Any
 
 import numpy as np
 
+from .._files import check_path
+from .._validate import MAX_MAGNITUDE
 from ..body import Body
 from ..cables import Cable
 from ..dynamics import Keyframes
@@ -27,8 +29,8 @@ __all__ = ["build_mesh", "build_material", "apply_fixed", "apply_loads", "apply_
 
 
 def _file(check: Checker, key: str, name: str, base: Path, what: str) -> Path:
-    """``name`` resolved against the scene file's folder; it must exist."""
-    file = Path(name) if Path(name).is_absolute() else base / name
+    """``name`` resolved against the scene file's folder (checked as a path first); it must exist."""
+    file = _path(check, name, key, base)
     if not file.is_file():
         raise check.error(key, f"{what} not found: {file}")
     return file
@@ -64,6 +66,21 @@ def build_mesh(check: Checker, table: dict[str, Any], base: Path) -> Mesh:
         except ParameterError as exc:
             raise check.error("mesh.axes", str(exc).removeprefix("axes: ")) from None
     return mesh
+
+
+def _path(check: Checker, name: str, key: str, base: Path, expand: bool = False) -> Path:
+    """A file named in the scene, relative to the scene's folder (``expand``: ``~`` is the home
+    folder); checked as a path first."""
+    try:
+        file = check_path(name, key)
+    except InputError as exc:
+        raise check.error(key, str(exc).removeprefix(f"{key}: ")) from None
+    file = file.expanduser() if expand else file
+    file = file if file.is_absolute() else base / file
+    try:
+        return check_path(file, key)
+    except InputError as exc:
+        raise check.error(key, str(exc).removeprefix(f"{key}: ")) from None
 
 
 def _box_bounds(check: Checker, box: dict[str, Any], key: str) -> tuple[np.ndarray, np.ndarray]:
@@ -237,6 +254,9 @@ def apply_cables(check: Checker, entries: list[dict[str, Any]], body: Body) -> l
 
 def build_dynamics(check: Checker, table: dict[str, Any], body: Body) -> dict[str, Any]:
     options = dict(table)
+    if not table["dt"] * table["steps"] <= MAX_MAGNITUDE:
+        raise check.error("dynamics.dt", f"the simulated time dt * steps is {table['dt'] * table['steps']:g} s, above "
+                          f"the documented limit {MAX_MAGNITUDE:g} s")
     schedule = table["actuation"]
     if schedule is not None:
         n_cables = len(body.cables)
@@ -259,8 +279,7 @@ def build_output(check: Checker, table: dict[str, Any], formulation: str, base: 
     if "directory" in out:
         if not out["directory"].strip():
             raise check.error("output.directory", "expected a folder name, got an empty string")
-        folder = Path(out["directory"]).expanduser()
-        out["directory"] = folder if folder.is_absolute() else base / folder
+        out["directory"] = _path(check, out["directory"], "output.directory", base, expand=True)
     else:
         out["directory"] = None
     if out["color_by"] == "pressure" and formulation != "mixed":
@@ -278,8 +297,7 @@ def build_target(check: Checker, table: dict[str, Any], body: Body, base: Path) 
     if "surface" in table:
         for name in ("surface", "rest"):
             if name in table:
-                file = Path(table[name])
-                file = file if file.is_absolute() else base / file
+                file = _path(check, table[name], f"target.{name}", base)
                 if not file.is_file():
                     raise check.error(f"target.{name}", f"surface file not found: {file}")
                 files[name] = file

@@ -17,7 +17,7 @@ from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
-from .._validate import Range
+from .._validate import MAX_CABLE_DIVISIONS, MAX_STARTS, MAX_TIME_STEPS, Range
 from ..body import FORMULATIONS, PRESSURE_MASSES, VOLUMETRIC_MEASURES, Body
 from ..cables import OUTSIDE_MODES, Cable
 from ..inverse import parameter_names
@@ -251,7 +251,8 @@ _LOADS = Table(
 _SOLVER = Table(
     {
         f.name: Field(
-            Integer(ge=int(f.metadata["range"].ge)) if f.metadata["integer"] else Number(f.metadata["range"]),
+            Integer(ge=int(f.metadata["range"].ge), le=f.metadata["maximum"]) if f.metadata["integer"]
+            else Number(f.metadata["range"]),
             f.metadata["doc"], default=f.default,
         )
         for f in fields(SolveOptions)
@@ -274,7 +275,7 @@ _CABLE = Table(
         "start": Field(_VEC3, "first point of a straight cable", "m", example=[0, 0.01, 0.01]),
         "direction": Field(_VEC3, "direction of a straight cable (any non-zero length)", example=[1, 0, 0]),
         "length": Field(Number(Range(gt=0)), "length of a straight cable", "m", example=0.4),
-        "divisions": Field(Integer(ge=1), "equal segments of a straight cable", example=10),
+        "divisions": Field(Integer(ge=1, le=MAX_CABLE_DIVISIONS), "equal segments of a straight cable", example=10),
         "stiffness": Field(Number(Range(gt=0)), "stiffness of each segment spring", "N/m", required=True,
                            missing="the stiffness of each segment, N/m", example=1e5),
         "actuation": Field(Number(Range(gt=0)), "alpha: segment rest lengths are scaled by it (1 rest, < 1 pulled)",
@@ -300,10 +301,10 @@ _CABLE = Table(
 _DYNAMICS = Table(
     {
         "dt": Field(Number(Range(gt=0)), "time step", "s", required=True, example=0.01),
-        "steps": Field(Integer(ge=1), "number of time steps", required=True, example=200),
+        "steps": Field(Integer(ge=1, le=MAX_TIME_STEPS), "number of time steps", required=True, example=200),
         "mass_damping": Field(Number(Range(ge=0)), "Rayleigh alpha_M", "1/s", default=0.0),
         "stiffness_damping": Field(Number(Range(ge=0)), "Rayleigh beta_K", "s", default=0.0),
-        "save_every": Field(Integer(ge=1), "write a frame every this many steps (plus the first and last)",
+        "save_every": Field(Integer(ge=1, le=MAX_TIME_STEPS), "write a frame every this many steps (plus the first and last)",
                             default=1),
         "initial": Field(String(("rest", "static")), "start at rest from the rest shape, or from the static "
                          "equilibrium (loads, actuations)", default="rest"),
@@ -363,7 +364,7 @@ _ESTIMATE = Table(
         "bounds": Field(Array(Tuple((Number(), Number()), "[lo, hi]"), 1), "one [lo, hi] per parameter",
                         default=None, example=[[1e3, 1e6], [1e3, 1e8]]),
         "method": Field(String(("least-squares", "l-bfgs-b", "nelder-mead")), "optimiser", default="least-squares"),
-        "starts": Field(Integer(ge=0), "number of extra random starts", default=0),
+        "starts": Field(Integer(ge=0, le=MAX_STARTS), "number of extra random starts", default=0),
     },
     doc="sorofem estimate (sorofem.estimate): fit these parameters so that the equilibrium meets [target].",
 )

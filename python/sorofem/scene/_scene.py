@@ -9,10 +9,11 @@ import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
+from .._files import check_path
 from ..body import Body
 from ..cables import Cable
 from ..dynamics import Trajectory, simulate
@@ -143,7 +144,7 @@ class Scene:
         FileNotFoundError
             The scene file itself does not exist.
         """
-        path = Path(path)
+        path = check_path(path, "scene")
         if not path.is_file():
             raise FileNotFoundError(f"scene file not found: {path}")
         try:
@@ -163,6 +164,10 @@ class Scene:
             raise SceneError(
                 f"invalid TOML: {exc}", path=path, line=int(match.group(1)) if match else None
             ) from None
+        except RecursionError:
+            # tomllib recurses once per nested array or inline table; no scene key nests deeper than 4.
+            raise SceneError("invalid TOML: arrays or inline tables nested too deeply for the parser (a scene "
+                             "nests them at most 4 levels deep)", path=path) from None
         return cls.from_data(raw, path, text=text)
 
     @classmethod
@@ -269,7 +274,8 @@ class Scene:
                             options=self.solve_options)
 
     def simulate(
-        self, *, body: Body | None = None, equilibrium: StaticResult | None = None, progress: bool | None = None
+        self, *, body: Body | None = None, equilibrium: StaticResult | None = None, progress: bool | None = None,
+        on_frames: Callable[..., None] | None = None,
     ) -> Trajectory:
         """Run :func:`sorofem.simulate` with the scene's ``[dynamics]`` (from the rest shape,
         or from :meth:`solve`'s equilibrium with ``initial = "static"``).
@@ -283,7 +289,7 @@ class Scene:
         equilibrium
             With ``initial = "static"``: the equilibrium of ``body`` to start from, if already
             solved (default: solved here). Ignored with ``initial = "rest"``.
-        progress
+        progress, on_frames
             See :func:`sorofem.simulate`.
 
         Raises
@@ -302,7 +308,7 @@ class Scene:
             body, d["dt"], d["steps"], actuation=d["actuation"], gravity=self.gravity,
             damping=(d["mass_damping"], d["stiffness_damping"]), initial=initial, save_every=d["save_every"],
             tolerance=self.solve_options.tolerance, max_iterations=self.solve_options.max_iterations,
-            progress=progress,
+            progress=progress, on_frames=on_frames,
         )
 
     def to_dict(self) -> dict[str, Any]:

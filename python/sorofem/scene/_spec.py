@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .._validate import Range
+from .._validate import MAX_INDEX, Range, shown
 from ..errors import SceneError
 
 __all__ = ["Spec", "Number", "Integer", "String", "Boolean", "Array", "Tuple", "Either", "Field", "Group", "Choice",
@@ -37,9 +37,7 @@ def _type_name(value: Any) -> str:
 
 def shown_value(value: Any) -> str:
     """``a string '0.45'``, ``an integer 3``: a value with its TOML type, for messages."""
-    text = ("true" if value else "false") if isinstance(value, bool) else repr(value)
-    if len(text) > 60:
-        text = text[:57] + "..."
+    text = ("true" if value else "false") if isinstance(value, bool) else shown(value, 60)
     return f"{_type_name(value)} {text}"
 
 
@@ -114,7 +112,12 @@ class Number(Spec):
 
 @dataclass(frozen=True)
 class Integer(Spec):
+    """An integer from ``ge`` to ``le``; every integer of a scene has an upper bound (by default
+    :data:`~sorofem._validate.MAX_INDEX`), so that no count or index can ask for unbounded work
+    or overflow a 64-bit integer."""
+
     ge: int | None = None
+    le: int = MAX_INDEX
 
     def what(self) -> str:
         return "an integer" + (f" >= {self.ge}" if self.ge is not None else "")
@@ -127,12 +130,15 @@ class Integer(Spec):
             raise c.fail(key, at, f"expected {self.what()}, got {shown_value(value)}")
         if self.ge is not None and value < self.ge:
             raise c.fail(key, at, f"expected {self.what()}, got {value}")
+        if value > self.le:
+            raise c.fail(key, at, f"expected an integer <= {self.le} (a documented limit), got {shown(value)}")
         return value
 
     def schema(self) -> dict[str, Any]:
         out: dict[str, Any] = {"type": "integer"}
         if self.ge is not None:
             out["minimum"] = self.ge
+        out["maximum"] = self.le
         return out
 
 

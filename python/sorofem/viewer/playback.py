@@ -544,6 +544,8 @@ def _join(body: Body, dt: float, pieces: list[Trajectory], alphas: NDArray[np.fl
         "kinetic_energy": np.concatenate([p.kinetic_energy[k > 0:] for k, p in enumerate(pieces)]),
         "cable_points": [frame for k, p in enumerate(pieces) for frame in p.cable_points[k > 0:]],
         "iterations": np.concatenate([p.iterations for p in pieces]),
+        "factorizations": np.concatenate([p.factorizations for p in pieces]),
+        "residuals": np.concatenate([p.residuals for p in pieces]),
         "cutbacks": sum(p.cutbacks for p in pieces),
         "velocities": pieces[-1].velocities,
     }
