@@ -121,6 +121,15 @@ def targets(rows: dict[str, Row], array_dir: Path) -> str:
         add("adjoint (1st call, incl. its factorisation) / forward solve", "sorofem/hammerbot-adjoint",
             good and ratio(good["seconds"], good["seconds_forward"]), 0.25, "x")
 
+    # Contact (issue 17).
+    for name, r in rows.items():
+        if in_table(name, "contact"):
+            good = ok_row(name)
+            add("static solve time with a floor / without (same process, alternating)", name,
+                good and ratio(good["seconds"], good["seconds_without"]), 2.0, "x")
+            timings = (good or {}).get("timings") or {}
+            add("contact pass / Newton time", name, ratio(timings.get("contact"), timings.get("total")), 0.25)
+
     # Sweeps (issue 21).
     name = "sorofem/sweep-cantilever-0.4m-8x2x2-200"
     if name in rows:

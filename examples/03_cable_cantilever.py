@@ -108,9 +108,9 @@ def lumped_weight(mesh: sf.Mesh) -> np.ndarray:
 
 
 def plot_tensions(tensions: list[np.ndarray], alphas: list[float], path: Path) -> None:
-    from sorofem.plot import _new_figure
+    from matplotlib.figure import Figure  # no pyplot: no window, no global state
 
-    fig = _new_figure((6.0, 4.0))
+    fig = Figure(figsize=(6.0, 4.0), dpi=120)
     ax = fig.add_subplot()
     for t, alpha in zip(tensions, alphas):
         ax.plot(np.arange(1, t.size + 1), t, "o-", markersize=3, label=f"alpha = {alpha:.2f}")

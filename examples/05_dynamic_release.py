@@ -121,9 +121,9 @@ def lumped_weight(mesh: sf.Mesh) -> np.ndarray:
 
 
 def plot_release(traj: sf.Trajectory, tip: np.ndarray, reference: np.ndarray, path: Path) -> None:
-    from sorofem.plot import _new_figure
+    from matplotlib.figure import Figure  # no pyplot: no window, no global state
 
-    fig = _new_figure((7.0, 5.5))
+    fig = Figure(figsize=(7.0, 5.5), dpi=120)
     ax, ax_e = fig.add_subplot(2, 1, 1), fig.add_subplot(2, 1, 2)
     u = traj.displacement[:, tip].mean(axis=1)
     for k, name in ((1, "u_y"), (2, "u_z")):

@@ -167,9 +167,9 @@ def make_cable() -> sf.Cable:
 
 
 def plot_convergence(levels: list[dict[str, Any]], extrapolated: float, path: Path) -> None:
-    from sorofem.plot import _new_figure
+    from matplotlib.figure import Figure  # no pyplot: no window, no global state
 
-    fig = _new_figure((6.0, 4.0))
+    fig = Figure(figsize=(6.0, 4.0), dpi=120)
     ax = fig.add_subplot()
     h = np.array([lv["edge_length"] for lv in levels]) * 1e3
     u = -np.array([lv["tip_uz"] for lv in levels]) * 1e3

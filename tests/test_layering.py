@@ -32,7 +32,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("fitting.fit",),
     ("fitting.cli",),
     ("fitting",),
-    ("cables",),
+    ("cables", "obstacles"),
     ("body",),
     ("static",),
     ("dynamics",),

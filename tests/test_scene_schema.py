@@ -80,6 +80,22 @@ snap_tolerance = 0.0
 outside = "error"
 free_node_mass = 0.0
 
+[[obstacle]]
+plane = { point = [0, 0, -0.01], normal = [0, 0, 1] }
+friction = 0.3
+path = [[0.0, 0, 0, 0], [0.02, 0, 0, -0.001]]
+
+[[obstacle]]
+sphere = { center = [0.05, 0.01, 0.05], radius = 0.02 }
+
+[[obstacle]]
+box = { min = [0.11, -0.01, -0.01], max = [0.13, 0.03, 0.03] }
+
+[contact]
+dhat = 1e-4
+friction_slip = 1e-5
+friction_velocity = 1e-3
+
 [dynamics]
 dt = 0.01
 steps = 2
@@ -149,6 +165,9 @@ STRUCTURALLY_BAD = [
     ("shear_modulus = 30e3", "shear_modulus = 30e3\npoisson_ratio = 0.3"),
     ('name = "tip"', 'name = "my tip"'),
     ("[[fixed]]", "[fixed]"),
+    ("friction = 0.3", "friction = -0.3"),
+    ("plane = { point", "sphere = { center = [0, 0, -1], radius = 0.1 }\nplane = { point"),
+    ("dhat = 1e-4", "dhat = 0"),
     ('color_by = "von_mises"', 'color_by = "stress"'),
     ("png = true", "png = 1"),
     ('directory = "results/full"', "directory = 3"),
@@ -245,7 +264,8 @@ def test_schema_header():
     schema = scene_module.json_schema()
     assert schema["$schema"] == "https://json-schema.org/draft/2020-12/schema"
     assert schema["type"] == "object" and schema["additionalProperties"] is False
-    assert set(schema["required"]) == {"mesh", "material", "fixed"}
+    # [[fixed]] is optional: a body may rest on [[obstacle]] entries instead (checked on load).
+    assert set(schema["required"]) == {"mesh", "material"}
     json.dumps(schema, allow_nan=False)  # plain JSON
 
 
@@ -283,9 +303,20 @@ def _object_paths(schema: dict[str, Any], path: str = "") -> dict[str, set[str]]
 
 
 def _at(data: Any, path: str) -> Any:
-    for part in filter(None, re.split(r"\.|(\[\d+\])", path)):
-        data = data[int(part[1:-1])] if part.startswith("[") else data[part]
-    return data
+    """The table at a schema path; ``[0]`` stands for the first entry of an array of tables that
+    has the rest of the path (an [[obstacle]] entry holds one of plane, sphere, box or mesh)."""
+    parts = [p for p in re.split(r"\.|(\[\d+\])", path) if p]
+    if not parts:
+        return data
+    head, rest = parts[0], ".".join(parts[1:]).replace(".[", "[")
+    if head.startswith("["):
+        for item in data:
+            try:
+                return _at(item, rest)
+            except KeyError:
+                continue
+        raise KeyError(path)
+    return _at(data[head], rest)
 
 
 def test_schema_lists_exactly_the_keys_the_validator_accepts(tmp_path):
@@ -294,8 +325,13 @@ def test_schema_lists_exactly_the_keys_the_validator_accepts(tmp_path):
     paths = _object_paths(scene_module.json_schema())
     assert {"", "mesh", "mesh.box", "material", "material.region[0]", "material.region[0].box", "fixed[0]",
             "fixed[0].box", "loads.forces[0]", "loads.forces[0].box", "cable[0]", "dynamics", "target",
-            "estimate", "control", "output"} <= set(paths)
+            "estimate", "control", "output", "obstacle[0].plane", "obstacle[0].sphere", "obstacle[0].box",
+            "obstacle[0].mesh", "contact"} <= set(paths)
     full = tomllib.loads(FULL_SCENE)
+    # A mesh obstacle needs its file: a tetrahedron beside the scene, apart from the beam.
+    (tmp_path / "tetra.obj").write_text("v 0.2 0 0\nv 0.3 0 0\nv 0.2 0.1 0\nv 0.2 0 0.1\n"
+                                        "f 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
+    full["obstacle"].append({"mesh": {"file": "tetra.obj", "scale": 1.0, "one_sided": False}})
     sf.Scene.from_toml(_dump(full), tmp_path / "s.toml")  # the inline rewrite is valid as it is
     for path, properties in paths.items():
         data = copy.deepcopy(full)
@@ -303,7 +339,7 @@ def test_schema_lists_exactly_the_keys_the_validator_accepts(tmp_path):
         with pytest.raises(sf.SceneError) as info:
             sf.Scene.from_toml(_dump(data), tmp_path / "s.toml")
         key = f"{path}.not_a_key" if path else "not_a_key"
-        assert info.value.key == key, (path, str(info.value))
+        assert re.sub(r"\[\d+\]", "[0]", info.value.key) == key, (path, str(info.value))
         allowed = re.search(r"\(allowed: (.*)\)$", info.value.message).group(1).split(", ")
         assert set(allowed) == properties, path
 

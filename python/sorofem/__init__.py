@@ -13,7 +13,9 @@ Examples
 
 from importlib import import_module
 
-from . import cables, dynamics, errors, fitting, inverse, io, materials, meshing, plot, progress, solver, targets
+from . import (
+    cables, dynamics, errors, fitting, inverse, io, materials, meshing, obstacles, plot, progress, solver, targets,
+)
 from ._deprecated import moved as _moved
 from ._version import __version__
 from .body import Body
@@ -36,6 +38,7 @@ from .inverse import control, estimate, gradient
 from .materials import MooneyRivlin, NeoHookean, Ogden, Yeoh
 from .mesh import Mesh
 from .meshing import tetrahedralize  # the mesher itself (optional extra) is imported on first use
+from .obstacles import Box, Obstacle, Plane, Sphere
 from .scene import Scene
 from .solver import SolveOptions, SolveReport
 from .static import StaticResult, actuate, solve_static
@@ -68,6 +71,10 @@ __all__ = [
     "SolveOptions",
     "Scene",
     "Cable",
+    "Obstacle",
+    "Plane",
+    "Sphere",
+    "Box",
     "actuate",
     "simulate",
     "Trajectory",
@@ -95,6 +102,7 @@ __all__ = [
     "io",
     "materials",
     "meshing",
+    "obstacles",
     "plot",
     "progress",
     "solver",

@@ -4,7 +4,7 @@ Internal API: users go through :mod:`sorofem`. Units SI, float64, node-major DOF
 ordering, index arrays int64. Errors are the classes of :mod:`sorofem.errors`.
 """
 
-from typing import Any, TypedDict
+from typing import Any, NotRequired, TypedDict
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,6 +22,8 @@ class _Timings(TypedDict):
     solve: float
     line_search: float
     failed_factorization: float  # the part of `factorization` spent in failed ones
+    contact: float  # the part of `assembly` and `line_search` spent on contact
+    step_bound: float  # the line search's collision detection, part of `line_search`
     total: float
 
 class _Report(TypedDict):
@@ -45,6 +47,31 @@ class _SolveOutput(_Report):
     reactions: _F  # (n_fixed, 3), N
     cable_points: list[_F]  # per cable (k, 3), m
     cable_tensions: list[_F]  # per cable (k - 1,), N
+    contact: _Contact | None  # with obstacles
+
+class _ContactForces(TypedDict):
+    forces: _F  # (n, 3) N, the obstacles' force on each node
+    obstacle_forces: _F  # (k, 3) N, per obstacle, on the body
+    min_distance: _F  # (k,) m; NaN: nothing within the report radius
+    active: _I  # (k,) stencils closer than dhat
+
+class _Contact(_ContactForces):
+    stiffness: float  # barrier stiffness in force, J/m^4
+    dhat: float  # m
+    iterate_min_distances: list[float]  # m, at every accepted Newton iterate
+
+class _ContactSettings(TypedDict):
+    dhat: float  # m
+    stiffness: float | None  # J/m^4; None before the first solve
+    n_obstacles: int
+
+class _TrajectoryContact(TypedDict):
+    forces: _F  # (frames, n, 3) N
+    obstacle_forces: _F  # (frames, k, 3) N
+    translations: _F  # (frames, k, 3) m, from each obstacle's place at t = 0
+    min_distance: _F  # (frames, k) m
+    active: _I  # (frames, k)
+    iterate_min_distances: list[float]  # m
 
 class _Cable(TypedDict, total=False):
     points: _F  # (k, 3), m; required
@@ -67,6 +94,7 @@ class _Trajectory(TypedDict):
     factorizations: list[int]  # numeric factorisations per step
     residuals: list[float]  # relative residual each step ended with
     cutbacks: int
+    contact: NotRequired[_TrajectoryContact]  # with obstacles only
     timings: dict[str, float]  # seconds per phase, all steps
 
 class _ParamGradient(TypedDict, total=False):
@@ -98,6 +126,18 @@ def rest_volumes(points: _F, tets: _I) -> _F:
 
 def boundary_faces(points: _F, tets: _I) -> _I:
     """Outward-oriented boundary triangles, (k, 3)."""
+
+def check_obstacle(obstacle: dict[str, Any]) -> dict[str, Any]:
+    """Check an obstacle description ("kind": "plane" | "sphere" | "box" | "mesh" and its
+    geometry, optional "friction" and "path"); {"closed": bool} (+ "vertices" (n, 3),
+    "triangles" (m, 3) for boxes and meshes). Raises ParameterError / MeshError."""
+
+def check_contact(points: _F, tets: _I, obstacles: list[dict[str, Any]], dhat: float | None = None) -> dict[str, Any]:
+    """Check obstacles against a body at rest (the error names the obstacle, the first node or
+    triangle and its distance) and dhat (> 0); {"dhat": the activation distance in force, m}."""
+
+def _contact_reference(x: _F, dhat: float) -> dict[str, Any]:
+    """Test hook: distances, mollifier and barrier at four points (4, 3) for the ipctk comparison."""
 
 def material_param_names(model: str, options: dict[str, Any] | None = None) -> list[str]:
     """Parameter names of a material model ("neo_hookean": ["mu", "lambda"]), in the order
@@ -253,6 +293,24 @@ class Model:
         `fixed`, initial positions (n, 3) or None. Newton settings: options, or the keyword
         arguments (defaults 1e-8, 50 per load step, 1), not both.
         Raises ConvergenceError whose `.report` is a _Report."""
+    def set_contact(
+        self,
+        obstacles: list[dict[str, Any]],
+        dhat: float | None = None,
+        stiffness: float | None = None,
+        friction_slip: float | None = None,
+        friction_velocity: float | None = None,
+    ) -> None:
+        """Set (replace) the obstacles (see check_obstacle) and the contact settings: dhat (m),
+        reference barrier stiffness (J/m^4), static friction slip (m), dynamic friction velocity
+        (m/s); None takes the default. An empty list removes contact."""
+    def contact_settings(self) -> _ContactSettings | None: ...
+    def contact_forces(self, positions: _F) -> _ContactForces | None:
+        """Contact forces at node positions (n, 3); None without obstacles."""
+    def contact_force_gradient(self, obstacle: int, weights: _F) -> _F:
+        """d(w . F_obstacle)/dx (n, 3) at the last equilibrium."""
+    def set_contact_audit(self, on: bool) -> None:
+        """Check every accepted Newton iterate for intersections in full (a test diagnostic)."""
     def element_fields(self, positions: _F) -> _ElementFields:
         """Per-element J and von Mises stress at the given positions (n, 3)."""
     def set_actuation(self, cable: int, actuation: float) -> None:

@@ -13,19 +13,23 @@ Examples
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ._extension import core
-from ._validate import as_index_array, check_memory, choice, describe, positive_scalar, vector_per_node
+from ._validate import (
+    as_finite, as_index_array, check_memory, choice, describe, positive_scalar, real, vector_per_node,
+)
 from .cables import Cable, CablePlacement, cable_index, check_actuation
-from .errors import InputError
+from .errors import InputError, ParameterError
 from .materials import Material
 from .mesh import Mesh
+from .obstacles import Obstacle
 
-__all__ = ["Body", "FORMULATIONS", "VOLUMETRIC_MEASURES", "PRESSURE_MASSES"]
+__all__ = ["Body", "ObstaclePlacement", "FORMULATIONS", "VOLUMETRIC_MEASURES", "PRESSURE_MASSES"]
 
 #: A lower bound of the bytes a model holds per node (sparse Hessian, its factorisation,
 #: per-element data; measured 13-31 kB for the standard and 24 kB and up for the mixed
@@ -41,8 +45,35 @@ VOLUMETRIC_MEASURES: tuple[str, ...] = ("log", "linear")
 PRESSURE_MASSES: tuple[str, ...] = ("consistent", "lumped")
 
 
+@dataclass(frozen=True)
+class ObstaclePlacement:
+    """An obstacle of a body (see :meth:`Body.add_obstacle`): the obstacle, the Coulomb friction
+    coefficient between it and the body, and its path (``(k, 4)`` rows ``[t, dx, dy, dz]``: a
+    prescribed translation in s and m, piecewise linear, held outside the keyframes; ``None``
+    when it stays put)."""
+
+    obstacle: Obstacle
+    friction: float = 0.0
+    path: NDArray[np.float64] | None = None
+
+    def to_core(self) -> dict[str, Any]:
+        """The description the extension takes."""
+        return self.obstacle.to_core() | {"friction": self.friction, "path": self.path}
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON types, for ``summary.json``."""
+        return {**self.obstacle.to_dict(), "friction": self.friction,
+                "path": None if self.path is None else self.path.tolist()}
+
+
+#: Contact settings :meth:`Body.set_contact` takes, with their units.
+CONTACT_SETTINGS: dict[str, str] = {
+    "dhat": "m", "stiffness": "J/m^4", "friction_slip": "m", "friction_velocity": "m/s",
+}
+
+
 class Body:
-    """A mesh, a material, boundary conditions and nodal loads.
+    """A mesh, a material, boundary conditions, nodal loads, cables and obstacles.
 
     The material, the formulation and its options may be changed later (``body.formulation =
     "mixed"``): the new value is checked as in the constructor and the next solve uses it.
@@ -122,6 +153,13 @@ class Body:
         self._cables: list[Cable] = []
         self._actuations: list[float] = []
         self._stiffnesses: list[float] = []
+        self._obstacles: list[ObstaclePlacement] = []
+        self._contact: dict[str, float | None] = dict.fromkeys(CONTACT_SETTINGS)
+        # The activation distance in force (from the core's check of the obstacles).
+        self._dhat: float | None = None
+        # What the extension's model was last given for contact (set again when it changes): a
+        # cell shared with the bodies of replace(), which share the model.
+        self._model_contact: list[Any] = [None]
         # The extension's Model and what it was built for: rebuilt when the supports, the cables
         # or the formulation change, since building it analyses the sparsity pattern.
         self._model: Any = None
@@ -231,7 +269,11 @@ class Body:
         other._cables = list(self._cables)
         other._actuations = list(self._actuations)
         other._stiffnesses = list(self._stiffnesses)
+        other._obstacles = list(self._obstacles)
+        other._contact = dict(self._contact)
+        other._dhat = self._dhat
         other._model, other._model_key = self._model, self._model_key
+        other._model_contact = self._model_contact
         return other
 
     # -- supports and loads -------------------------------------------------------------
@@ -359,6 +401,114 @@ class Body:
         index = cable_index(self, cable)
         return np.asarray(self._built_model().cable_rest_lengths()[index], dtype=np.float64)
 
+    # -- obstacles ----------------------------------------------------------------------
+
+    def add_obstacle(self, obstacle: Obstacle, friction: float = 0.0, *, path: ArrayLike | None = None) -> int:
+        """Add a rigid obstacle the body must not pass through; returns its index.
+
+        Parameters
+        ----------
+        obstacle
+            A :class:`sorofem.Plane`, :class:`sorofem.Sphere`, :class:`sorofem.Box` or
+            :meth:`sorofem.Obstacle.mesh`.
+        friction
+            Coulomb friction coefficient between the obstacle and the body, >= 0 (0:
+            frictionless). Static solves lag it at each load step's start and again at the
+            equilibrium; dynamics at each time step's start.
+        path
+            Keyframes ``[[t, dx, dy, dz], ...]`` (s, m) of a prescribed translation followed
+            in :func:`sorofem.simulate` (piecewise linear, held before the first and after the
+            last); static solves use the translation at ``t = 0``. ``None``: it stays put.
+
+        Raises
+        ------
+        ParameterError
+            The obstacle touches or intersects the body at rest (the message names it, the
+            first node or triangle and its distance), ``friction < 0``, bad keyframes.
+
+        Examples
+        --------
+        >>> import sorofem as sf
+        >>> mesh = sf.Mesh.box(size=(0.1, 0.1, 0.1), cells=(2, 2, 2), origin=(0, 0, 1e-4))
+        >>> body = sf.Body(mesh, sf.NeoHookean(youngs_modulus=66e3, poisson_ratio=0.45, density=1080))
+        >>> body.add_obstacle(sf.Plane((0, 0, 0), (0, 0, 1)), friction=0.5)
+        0
+        """
+        if not isinstance(obstacle, Obstacle):
+            raise InputError(f"obstacle: expected a sorofem obstacle (Plane, Sphere, Box, Obstacle.mesh), "
+                             f"got {describe(obstacle)}")
+        friction = real(friction, "friction", minimum=0.0, strict=False)
+        keyframes = None
+        if path is not None:
+            keyframes = as_finite(path, "path", (None, 4))
+            if len(keyframes) == 0:
+                raise ParameterError("path: expected at least one [t, dx, dy, dz] keyframe", "path")
+            if np.any(np.diff(keyframes[:, 0]) < 0):
+                raise ParameterError(f"path: keyframe times must not decrease, got {keyframes[:, 0].tolist()}", "path")
+        placement = ObstaclePlacement(obstacle, friction, keyframes)
+        self._check_contact(self._obstacles + [placement], self._contact["dhat"])
+        self._obstacles.append(placement)
+        return len(self._obstacles) - 1
+
+    def set_contact(self, **settings: float | None) -> None:
+        """Change contact settings, given as keywords (``None`` restores a default); the
+        settings not given keep their values.
+
+        Other Parameters
+        ----------------
+        dhat : float or None
+            Activation distance of the barrier, m: the body feels an obstacle closer than
+            this and rests a fraction of it away. Default: 1 % of the mean boundary edge.
+        stiffness : float or None
+            Reference barrier stiffness, J/m^4. Default: fixed at the first solve from the
+            material, so that a node pushed with ``mu h^2`` (shear modulus, mean boundary edge)
+            rests at ``dhat / 10``.
+        friction_slip : float or None
+            Static solves: the slip over a load step below which friction sticks (smoothed), m.
+            Default ``dhat / 10``.
+        friction_velocity : float or None
+            Dynamics: the sliding speed below which friction sticks (smoothed), m/s. Default
+            1e-3 (IPC's).
+
+        Raises
+        ------
+        InputError
+            An unknown setting.
+        ParameterError
+            A value that is not finite and > 0.
+        """
+        for name, value in settings.items():
+            if name not in CONTACT_SETTINGS:
+                raise InputError(f"set_contact: unknown setting {name!r}; expected one of {list(CONTACT_SETTINGS)}")
+            if value is not None:
+                positive_scalar(value, name)
+        merged = self._contact | {k: (None if v is None else float(v)) for k, v in settings.items()}
+        self._check_contact(self._obstacles, merged["dhat"])
+        self._contact = merged
+
+    def _check_contact(self, obstacles: list[ObstaclePlacement], dhat: float | None) -> None:
+        """The core's check of the obstacles against the rest mesh; keeps the dhat in force."""
+        if not obstacles:
+            self._dhat = None
+            return
+        checked = core().check_contact(self._mesh.points, self._mesh.tets, [o.to_core() for o in obstacles], dhat)
+        self._dhat = float(checked["dhat"])
+
+    @property
+    def obstacles(self) -> tuple[ObstaclePlacement, ...]:
+        """The obstacles added to the body, in index order."""
+        return tuple(self._obstacles)
+
+    @property
+    def contact_settings(self) -> dict[str, float | None]:
+        """The contact settings given (``None``: default); see :meth:`set_contact`."""
+        return dict(self._contact)
+
+    @property
+    def dhat(self) -> float | None:
+        """The barrier's activation distance in force, m (``None`` without obstacles)."""
+        return self._dhat
+
     # -- the compiled model ---------------------------------------------------------------
 
     def core_model(self) -> Any:
@@ -373,6 +523,10 @@ class Body:
         """
         model = self._built_model()
         model.set_material_model(*self._material.core_material(self._mesh.n_tets))
+        contact = (tuple(id(o) for o in self._obstacles), tuple(self._contact.items()))
+        if self._model_contact[0] != contact:
+            model.set_contact([o.to_core() for o in self._obstacles], **self._contact)
+            self._model_contact[0] = contact
         for c, (alpha, stiffness) in enumerate(zip(self._actuations, self._stiffnesses)):
             model.set_actuation(c, alpha)
             model.set_cable_stiffness(c, stiffness)
@@ -394,6 +548,7 @@ class Body:
                 cables=cables or None,
             )
             self._model_key = key
+            self._model_contact = [None]
         return self._model
 
     def __getstate__(self) -> dict[str, Any]:

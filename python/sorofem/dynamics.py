@@ -263,9 +263,11 @@ class PvdWriter:
         """Frames written so far."""
         return len(self.entries)
 
-    def add(self, times: ArrayLike, positions: ArrayLike, cable_points: Sequence[Sequence[ArrayLike]] = ()) -> None:
-        """Write frames: their ``times`` ``(k,)``, node ``positions`` ``(k, n_nodes, 3)`` and, with
-        cables, per frame one ``(p, 3)`` array per cable."""
+    def add(self, times: ArrayLike, positions: ArrayLike, cable_points: Sequence[Sequence[ArrayLike]] = (),
+            contact_forces: ArrayLike | None = None) -> None:
+        """Write frames: their ``times`` ``(k,)``, node ``positions`` ``(k, n_nodes, 3)``, with
+        cables per frame one ``(p, 3)`` array per cable, and with obstacles the contact force on
+        each node ``(k, n_nodes, 3)`` (N; point data ``contact_force``)."""
         import meshio
 
         mesh = self.body.mesh
@@ -276,18 +278,23 @@ class PvdWriter:
             x = positions[k]
             j = np.asarray(self._model.element_fields(x)["J"], dtype=np.float64)
             points, disp = x, x - mesh.points
+            point_data = {"displacement": disp}
+            if contact_forces is not None:
+                point_data["contact_force"] = np.asarray(contact_forces, dtype=np.float64)[k].reshape(mesh.n_nodes, 3)
             cells: list[tuple[str, NDArray[np.int64]]] = [("tetra", mesh.tets)]
             cell_j = [j]
             if self._lines is not None and k < len(cable_points):
                 cable_x = np.vstack([np.asarray(c, dtype=np.float64) for c in cable_points[k]])
                 points = np.vstack([x, cable_x])
                 disp = np.vstack([disp, cable_x - self._rest_cables])
+                point_data = {key: np.vstack([values, np.zeros((len(cable_x), 3))]) for key, values in point_data.items()}
+                point_data["displacement"] = disp
                 cells.append(("line", self._lines))
                 # A segment's "volume ratio" is its stretch, deformed over rest length.
                 lengths = np.linalg.norm(points[self._lines[:, 1]] - points[self._lines[:, 0]], axis=1)
                 cell_j.append(lengths / self._rest_lengths)
             file = self.frames_dir / f"frame_{f:05d}.vtu"
-            meshio_write(file, meshio.Mesh(points, cells, point_data={"displacement": disp}, cell_data={"J": cell_j}),
+            meshio_write(file, meshio.Mesh(points, cells, point_data=point_data, cell_data={"J": cell_j}),
                          run_id=self.run_id)
             self.entries.append(
                 f'    <DataSet timestep="{float(times[k])!r}" group="" part="0" '
@@ -344,6 +351,20 @@ class Trajectory:
         The alphas used, ``(steps, n_cables)``.
     timings
         ``{"simulate": s}``: wall-clock time of the integration.
+    contact_forces
+        With obstacles: the force they exert on each node at each frame, ``(frames, n_nodes,
+        3)``, N (``None`` without obstacles).
+    obstacle_forces
+        Total force of each obstacle on the body, ``(frames, n_obstacles, 3)``, N.
+    obstacle_translations
+        Where each obstacle is (its path's translation), ``(frames, n_obstacles, 3)``, m.
+    min_distances
+        Smallest distance to each obstacle, ``(frames, n_obstacles)``, m (NaN: nothing near).
+    active_contacts
+        Contact stencils closer than ``dhat`` per obstacle, ``(frames, n_obstacles)``.
+    iterate_min_distances
+        Minimum distance to the obstacles at every accepted Newton iterate of every step
+        (``inf``: nothing within ``dhat``): all > 0.
     """
 
     def __init__(self, body: Body, dt: float, out: Mapping[str, Any], actuation: NDArray[np.float64], elapsed: float) -> None:
@@ -363,6 +384,20 @@ class Trajectory:
         #: The cables' alphas before the first step, ``(n_cables,)``.
         self.initial_actuation = np.asarray(body.actuations, dtype=np.float64)
         self.timings = {"simulate": elapsed}
+        contact = out.get("contact")
+        k = len(body.obstacles)
+        frames = self.times.size
+
+        def field(key: str, shape: tuple[int, ...], dtype: Any = np.float64) -> NDArray[Any] | None:
+            return None if contact is None else np.asarray(contact[key], dtype=dtype).reshape(frames, *shape)
+
+        self.contact_forces = field("forces", (-1, 3))
+        self.obstacle_forces = field("obstacle_forces", (k, 3))
+        self.obstacle_translations = field("translations", (k, 3))
+        self.min_distances = field("min_distance", (k,))
+        self.active_contacts = field("active", (k,), np.int64)
+        self.iterate_min_distances = np.asarray([] if contact is None else contact["iterate_min_distances"],
+                                                dtype=np.float64)
 
     @property
     def n_frames(self) -> int:
@@ -402,7 +437,7 @@ class Trajectory:
         ``.pvd`` path.
         """
         writer = PvdWriter(self.body, directory, name, run_id=run_id)
-        writer.add(self.times, self.positions, self.cable_points)
+        writer.add(self.times, self.positions, self.cable_points, self.contact_forces)
         return writer.close()
 
     def to_dict(self) -> dict[str, Any]:
@@ -420,8 +455,32 @@ class Trajectory:
             "max_kinetic_energy": float(self.kinetic_energy.max()),
             "max_displacement": float(np.linalg.norm(self.displacement[-1], axis=1).max(initial=0.0)),
             "final_actuation": self.actuation[-1].tolist() if self.actuation.size else [],
+            **self._contact_dict(),
             "timings": dict(self.timings),
         }
+
+    def _contact_dict(self) -> dict[str, Any]:
+        """``{"contact": ...}`` (per obstacle: the final and the largest force, the smallest
+        distance over the frames) when the body has obstacles."""
+        if self.obstacle_forces is None or self.min_distances is None or self.active_contacts is None:
+            return {}
+        magnitude = np.linalg.norm(self.obstacle_forces, axis=2)
+        obstacles = []
+        for k, placement in enumerate(self.body.obstacles):
+            distances = self.min_distances[:, k]
+            near = distances[np.isfinite(distances)]
+            obstacles.append({
+                **placement.to_dict(),
+                "final_force": self.obstacle_forces[-1, k].tolist(),
+                "max_force": float(magnitude[:, k].max(initial=0.0)),
+                "min_distance": float(near.min()) if near.size else None,
+                "max_active_contacts": int(self.active_contacts[:, k].max(initial=0)),
+            })
+        finite = self.iterate_min_distances[np.isfinite(self.iterate_min_distances)]
+        return {"contact": {
+            "obstacles": obstacles,
+            "min_iterate_distance": float(finite.min()) if finite.size else None,
+        }}
 
     def __repr__(self) -> str:
         return (
@@ -581,8 +640,10 @@ def simulate(
     bar = Progress(total=steps, desc="simulate", unit="steps", enabled=progress)
     joined = _Joined()
     try:
-        if not (bar.active or on_frames is not None) or _has_free_cable_nodes(body):
-            # Free cable nodes' velocities do not survive a restart: one piece, a moving clock.
+        if (not (bar.active or on_frames is not None) or _has_free_cable_nodes(body)
+                or any(o.path is not None for o in body.obstacles)):
+            # Free cable nodes' velocities do not survive a restart, and obstacle paths run on
+            # the time of one call: one piece, a moving clock.
             out = run(steps, alphas, x0, v0, save_every)
             check_finite_solution(out, None, "the time integration")
             bar.set(steps, postfix=_step_postfix(out, steps, dt))
@@ -644,6 +705,7 @@ class _Joined:
         self.iterations: list[NDArray[np.int64]] = []
         self.factorizations: list[NDArray[np.int64]] = []
         self.residuals: list[NDArray[np.float64]] = []
+        self.contact: list[dict[str, Any]] = []
         self.cutbacks = 0
         self.velocities: Any = None
         #: Steps integrated.
@@ -660,6 +722,11 @@ class _Joined:
             "factorizations": np.concatenate(self.factorizations),
             "residuals": np.concatenate(self.residuals),
             "cutbacks": self.cutbacks,
+            "contact": None if not self.contact else {
+                key: (np.concatenate([c[key] for c in self.contact]) if key != "iterate_min_distances"
+                      else [d for c in self.contact for d in c[key]])
+                for key in self.contact[0]
+            },
         }
 
 
@@ -710,6 +777,11 @@ def _run_in_chunks(
         joined.positions.append(new_positions)
         joined.kinetic_energy.append(np.asarray(out["kinetic_energy"], dtype=np.float64)[keep])
         joined.cable_points.extend(new_cables)
+        if out.get("contact") is not None:
+            joined.contact.append(out["contact"] | {
+                key: np.asarray(out["contact"][key])[keep]
+                for key in ("forces", "obstacle_forces", "translations", "min_distance", "active")
+            })
         joined.iterations.append(np.asarray(out["iterations"], dtype=np.int64))
         joined.factorizations.append(np.asarray(out["factorizations"], dtype=np.int64))
         joined.residuals.append(np.asarray(out["residuals"], dtype=np.float64))

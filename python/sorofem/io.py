@@ -193,8 +193,9 @@ def result_mesh(
     points: str = "rest",
 ) -> Any:
     """A result as a :class:`meshio.Mesh`: linear tetrahedra with point data ``displacement``
-    (m), ``pressure`` (Pa, mixed formulation only) and ``extra_point_data``, cell data ``J``
-    (volume ratio) and ``von_mises`` (Pa).
+    (m), ``pressure`` (Pa, mixed formulation only), ``contact_force`` (N, the obstacles' force
+    on each node, bodies with obstacles only) and ``extra_point_data``, cell data ``J`` (volume
+    ratio) and ``von_mises`` (Pa).
 
     Parameters
     ----------
@@ -216,6 +217,8 @@ def result_mesh(
     point_data: dict[str, np.ndarray] = {"displacement": result.displacement}
     if result.pressure is not None:
         point_data["pressure"] = result.pressure
+    if getattr(result, "contact", None) is not None:
+        point_data["contact_force"] = np.asarray(result.contact_forces)
     for name, values in (extra_point_data or {}).items():
         arr = np.asarray(values)
         if arr.shape[:1] != (mesh.n_nodes,):

@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 from ._text import plural
 from .dynamics import Trajectory
 from .errors import InputError
+from .obstacles import obstacle_surface
 from .solver import SolveReport
 from .static import StaticResult
 
@@ -155,7 +156,8 @@ def plot_rest_and_deformed(
     ax: Any = None,
 ) -> Any:
     """Rest shape (grey wireframe) and deformed surface coloured by a field, with a colour bar;
-    the body's cables, if any, in red (rest shape dashed). Returns the Figure.
+    the body's cables, if any, in red (rest shape dashed); its obstacles translucent grey, with
+    the contact forces on the nodes as black arrows. Returns the Figure.
 
     Axes share one scale so shapes are not distorted.
 
@@ -225,6 +227,12 @@ def plot_rest_and_deformed(
 
     both = np.vstack([rest, deformed])
     lo, hi = both.min(axis=0), both.max(axis=0)
+    obstacles = _draw_obstacles(ax, result, lo, hi)
+    if len(obstacles):
+        # Obstacles widen the view, but not by more than half the body's size on each side.
+        margin = 0.5 * (hi - lo)
+        lo = np.minimum(lo, np.maximum(obstacles.min(axis=0), lo - margin))
+        hi = np.maximum(hi, np.minimum(obstacles.max(axis=0), hi + margin))
     span = hi - lo
     # A flat direction would make a zero-height box; give it a sliver of the largest span.
     span = np.maximum(span, 0.02 * float(span.max() or 1.0))
@@ -263,6 +271,35 @@ def plot_rest_and_deformed(
     if path is not None:
         fig.savefig(os.fspath(path))
     return fig
+
+
+def _draw_obstacles(ax, result: StaticResult, lo: NDArray[np.float64], hi: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Draws the body's obstacles (where they are at t = 0) and the contact forces; returns the
+    drawn obstacle vertices, ``(k, 3)``."""
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    placements = getattr(result.body, "obstacles", ())
+    if not placements:
+        return np.zeros((0, 3))
+    centre, size = 0.5 * (lo + hi), float(np.linalg.norm(hi - lo))
+    drawn = []
+    for placement in placements:
+        vertices, triangles = obstacle_surface(placement.obstacle, 0.6 * (hi - lo), centre)
+        if placement.path is not None:
+            vertices = vertices + [np.interp(0.0, placement.path[:, 0], placement.path[:, k]) for k in (1, 2, 3)]
+        ax.add_collection3d(Poly3DCollection(vertices[triangles], facecolors=(0.55, 0.55, 0.6, 0.25),
+                                             edgecolors=(0.3, 0.3, 0.35, 0.3), linewidths=0.3))
+        drawn.append(vertices)
+    forces = result.contact_forces
+    magnitude = np.linalg.norm(forces, axis=1)
+    loaded = magnitude > 1e-3 * float(magnitude.max(initial=0.0))
+    if loaded.any():
+        scale = 0.15 * size / float(magnitude.max())
+        x = result.positions[loaded]
+        ax.quiver(*x.T, *(scale * forces[loaded]).T, color="black", linewidth=0.8,
+                  label=f"contact forces (max {magnitude.max():.3g} N per node)")
+        ax.legend(loc="upper left")
+    return np.vstack(drawn)
 
 
 def plot_convergence(

@@ -33,7 +33,7 @@ from .io import result_mesh
 from .progress import Progress
 from .solver import SolveOptions, SolveReport
 
-__all__ = ["StaticResult", "solve_static", "actuate", "check_magnitudes", "check_finite_solution"]
+__all__ = ["StaticResult", "ContactState", "solve_static", "actuate", "check_magnitudes", "check_finite_solution"]
 
 
 def _norm(values: ArrayLike) -> float:
@@ -118,6 +118,67 @@ def check_finite_solution(
                 raise SolverError(f"{what} produced non-finite {key.replace('_', ' ')}; no result is returned")
 
 
+class ContactState:
+    """The contact between a body and its obstacles at a solved state.
+
+    Attributes
+    ----------
+    forces
+        Force the obstacles exert on each node, ``(n_nodes, 3)``, N (barrier and friction).
+    obstacle_forces
+        Total force of each obstacle on the body, ``(n_obstacles, 3)``, N.
+    min_distances
+        Smallest distance between the body and each obstacle, ``(n_obstacles,)``, m; NaN where
+        nothing of the body is near it (farther than a twentieth of the scene's size).
+    active
+        Number of contact stencils closer than ``dhat`` per obstacle, ``(n_obstacles,)``.
+    dhat
+        The barrier's activation distance, m.
+    stiffness
+        The barrier stiffness the solve ended with, J/m^4.
+    iterate_min_distances
+        Minimum distance at every accepted Newton iterate (``inf``: nothing within ``dhat``):
+        all > 0, as no accepted iterate touches an obstacle.
+    """
+
+    def __init__(self, data: Mapping[str, Any]) -> None:
+        self.forces = np.asarray(data["forces"], dtype=np.float64).reshape(-1, 3)
+        self.obstacle_forces = np.asarray(data["obstacle_forces"], dtype=np.float64).reshape(-1, 3)
+        self.min_distances = np.asarray(data["min_distance"], dtype=np.float64).reshape(-1)
+        self.active = np.asarray(data["active"], dtype=np.int64).reshape(-1)
+        self.dhat = float(data.get("dhat", math.nan))
+        self.stiffness = float(data.get("stiffness", math.nan))
+        self.iterate_min_distances = np.asarray(data.get("iterate_min_distances", []), dtype=np.float64)
+
+    @property
+    def min_distance(self) -> float | None:
+        """The smallest of :attr:`min_distances` (m), ``None`` when nothing is near."""
+        near = self.min_distances[np.isfinite(self.min_distances)]
+        return float(near.min()) if near.size else None
+
+    @property
+    def active_contacts(self) -> int:
+        """Contact stencils closer than ``dhat``, over all obstacles."""
+        return int(self.active.sum())
+
+    def to_dict(self, obstacles: Sequence[Any] = ()) -> dict[str, Any]:
+        """Plain JSON types for ``summary.json``; ``obstacles`` (the body's placements) add each
+        obstacle's description."""
+        described = [o.to_dict() for o in obstacles] + [{}] * len(self.obstacle_forces)
+        return {
+            "dhat": self.dhat,
+            "stiffness": self.stiffness,
+            "total_force": self.obstacle_forces.sum(axis=0).tolist(),
+            "min_distance": self.min_distance,
+            "active_contacts": self.active_contacts,
+            "obstacles": [
+                {**described[k], "force": self.obstacle_forces[k].tolist(),
+                 "min_distance": float(d) if math.isfinite(d) else None, "active_contacts": int(self.active[k])}
+                for k, d in enumerate(self.min_distances)
+            ],
+        }
+
+
 class StaticResult:
     """Equilibrium of a body, returned by :func:`solve_static`.
 
@@ -157,8 +218,11 @@ class StaticResult:
         cable_points: Sequence[ArrayLike] | None = None,
         cable_tensions: Sequence[ArrayLike] | None = None,
         element_fields: Mapping[str, ArrayLike] | None = None,
+        contact: Mapping[str, Any] | None = None,
     ) -> None:
         self.body = body
+        #: The contact with the body's obstacles (:class:`ContactState`), ``None`` without any.
+        self.contact = None if contact is None else ContactState(contact)
         #: Current position of every cable point, one ``(k, 3)`` array per cable (m).
         self.cable_points = [np.asarray(p, dtype=np.float64).reshape(-1, 3) for p in cable_points or []]
         #: Tension of every cable segment, one ``(k - 1,)`` array per cable (N, >= 0).
@@ -233,6 +297,28 @@ class StaticResult:
         return out
 
     @property
+    def contact_forces(self) -> NDArray[np.float64]:
+        """Force the obstacles exert on each node, ``(n_nodes, 3)``, N (zeros without obstacles)."""
+        if self.contact is None:
+            return np.zeros((self.mesh.n_nodes, 3))
+        return self.contact.forces
+
+    @property
+    def obstacle_forces(self) -> NDArray[np.float64]:
+        """Total force of each obstacle on the body, ``(n_obstacles, 3)``, N."""
+        return np.zeros((0, 3)) if self.contact is None else self.contact.obstacle_forces
+
+    @property
+    def min_distance(self) -> float | None:
+        """Smallest distance between the body and its obstacles, m (``None``: none near)."""
+        return None if self.contact is None else self.contact.min_distance
+
+    @property
+    def active_contacts(self) -> int:
+        """Contact stencils closer than ``dhat``, over all obstacles."""
+        return 0 if self.contact is None else self.contact.active_contacts
+
+    @property
     def max_displacement(self) -> float:
         """Largest nodal displacement magnitude, m."""
         return float(np.linalg.norm(self.displacement, axis=1).max(initial=0.0))
@@ -258,6 +344,7 @@ class StaticResult:
             "max_pressure": None if self.pressure is None else float(self.pressure.max()),
             "max_von_mises": float(self.von_mises.max()),
             **self._cables_dict(),
+            **({} if self.contact is None else {"contact": self.contact.to_dict(self.body.obstacles)}),
             "report": self.report.to_dict(),
         }
 
@@ -416,7 +503,7 @@ def solve_static(
     return StaticResult(
         body, positions, out.get("pressure"), report, reactions=out.get("reactions"),
         cable_points=out.get("cable_points"), cable_tensions=out.get("cable_tensions"),
-        element_fields=fields,
+        element_fields=fields, contact=out.get("contact"),
     )
 
 

@@ -132,8 +132,10 @@ pub trait NewtonProblem {
     ) -> Result<Option<Vec<f64>>>;
     /// Adds `t d` (free DOFs) to `z`.
     fn step(&self, z: &mut [f64], d: &[f64], t: f64);
-    /// The largest step length `t <= 1` the line search tries first along `d` (1: no bound).
-    fn step_bound(&self, _d: &[f64]) -> f64 {
+    /// The largest step length `t <= 1` the line search may take along `d` from `z` (1: no
+    /// bound): its first trial. Contact bounds it by continuous collision detection, so that no
+    /// step length up to it makes the state intersect.
+    fn step_bound(&mut self, _z: &[f64], _d: &[f64]) -> f64 {
         1.0
     }
     /// The iterates the problem carries besides `z`, if any.
@@ -151,11 +153,14 @@ pub trait NewtonProblem {
 /// Iterates a problem carries besides `z` (the element pressures of
 /// [`NewtonOptions::pressure_iterates`]): set at the start `z` of each load step, moved to the
 /// trial `z + t d` (before it is evaluated, for the Hessian kept with it, and again once a step
-/// is accepted), and the trial's kept as the next iterate's.
+/// is accepted), and the trial's kept as the next iterate's. The contact's barrier stiffness is
+/// one too: its update at `commit` changes the merit of the accepted iterate, which is then
+/// evaluated again.
 pub trait AuxiliaryIterates {
     fn start(&mut self, z: &[f64]);
     fn trial(&mut self, z: &[f64], d: &[f64], t: f64);
-    fn commit(&mut self);
+    /// Keeps the trial's iterates; `true` when that changed the merit at the accepted iterate.
+    fn commit(&mut self) -> bool;
 }
 
 fn norm(v: &[f64]) -> f64 {
@@ -330,14 +335,12 @@ fn newton_step(
         // accepted step saves rejected trials (cheap merit evaluations) but costs Newton
         // iterations (a factorisation each).
         //
-        // Steps the problem bounds (a node moved farther than the body is large) start at the
-        // largest power of two within the bound: the halving would reject the longer ones one
-        // by one.
-        let bound = problem.step_bound(&d);
-        let mut t: f64 = 1.0;
-        while t > bound && t > 1e-12 {
-            t *= 0.5;
-        }
+        // Steps the problem bounds start at the bound: the halving would reject the longer ones
+        // one by one, and a contact's collision bound must not be exceeded at all.
+        let t0_bound = Instant::now();
+        let bound = problem.step_bound(z, &d);
+        report.timings.step_bound += t0_bound.elapsed().as_secs_f64();
+        let mut t: f64 = bound.clamp(1e-12, 1.0);
         let mut accepted = false;
         let mut trial = z.to_vec();
         let prepare = prepare_next && !projected && !problem.reuses_factorizations();
@@ -391,14 +394,18 @@ fn newton_step(
             || merit != Merit::Energy
             || (t == 1.0 && previous - energy > 0.5 * predicted);
         let t0 = Instant::now();
+        let mut merit_changed = false;
         if let Some(auxiliary) = problem.auxiliary() {
             if !(prepare && t == 1.0) {
                 auxiliary.trial(z, &d, t);
             }
-            auxiliary.commit();
+            merit_changed = auxiliary.commit();
+        }
+        z.copy_from_slice(&trial);
+        if merit_changed {
+            (energy, g) = problem.merit_and_gradient(z);
         }
         report.timings.assembly += t0.elapsed().as_secs_f64();
-        z.copy_from_slice(&trial);
         report.step_lengths.push(t);
         // In the converging phase (a full step from an exact Hessian) the next full step is
         // likely accepted at once: its trial then assembles the Hessian there too, saving a
@@ -453,8 +460,14 @@ mod tests {
         fn step(&self, z: &mut [f64], d: &[f64], t: f64) {
             z[0] += t * d[0];
         }
-        fn step_bound(&self, d: &[f64]) -> f64 {
-            (self.bound / d[0].abs()).min(1.0)
+        /// The largest power of two within the bound, as the model's diameter bound.
+        fn step_bound(&mut self, _z: &[f64], d: &[f64]) -> f64 {
+            let bound = (self.bound / d[0].abs()).min(1.0);
+            let mut t: f64 = 1.0;
+            while t > bound {
+                t *= 0.5;
+            }
+            t
         }
     }
 

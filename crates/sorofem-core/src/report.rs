@@ -14,6 +14,12 @@ pub struct Timings {
     pub failed_factorization: f64,
     pub solve: f64,
     pub line_search: f64,
+    /// The part of `assembly` and `line_search` spent on contact: broad phase, barrier and
+    /// friction stencils, their scatter into the free DOFs.
+    pub contact: f64,
+    /// The line search's step bounds (the contact's continuous collision detection), part of
+    /// `line_search`.
+    pub step_bound: f64,
     pub total: f64,
     /// Numeric factorisations, and how many of them failed or gave no descent direction.
     pub factorizations: usize,

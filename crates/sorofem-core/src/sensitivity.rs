@@ -6,6 +6,10 @@
 //! part of z and `dr/dkappa` acts on the pressure rows); one factorisation serves every
 //! forward and adjoint solve until the model or its parameters change.
 //!
+//! With obstacles, H holds the contact Hessian at the solution (the barrier at the solve's
+//! stiffness, and the friction lagged there): exact for frictionless contact, whose barrier is
+//! smooth; with friction the lag's own dependence on the parameters is left out.
+//!
 //! `dr/dtheta` comes from the terms of the model's registry that have parameters
 //! ([`crate::energy::ParamTerm`]), element by element: nothing here is specific to a term.
 //! Parameters are named blocks: the material's parameters (per tet, Pa or as the model
@@ -264,9 +268,10 @@ impl Model {
         if self.factor_at_solution {
             return Ok(());
         }
-        let eval =
+        let mut eval =
             self.assembler
                 .evaluate(&self.terms.internal(), z, false, Some(HessianMode::Exact));
+        self.add_contact_hessian(z, &mut eval.hessian, HessianMode::Exact);
         let ok = self
             .factor
             .factor(self.assembler.pattern(), &eval.hessian)?;

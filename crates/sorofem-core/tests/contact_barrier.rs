@@ -220,7 +220,7 @@ fn stencil_derivatives_match_finite_differences() {
     let mesh = stencil_mesh(&rest);
     let potential = BarrierPotential::try_new(0.5, 1e3).unwrap();
     let dhat2 = 0.25;
-    let mut counts = [0usize; 5];
+    let mut counts = [0usize; 7];
     let mut trials = 0;
     while counts.iter().any(|&c| c < 15) {
         trials += 1;
@@ -264,6 +264,40 @@ fn stencil_derivatives_match_finite_differences() {
         {
             check_stencil("mollified edge-edge", &potential, &mesh, &ee, &flat);
             counts[2] += 1;
+        }
+        // A ball against a triangle and an edge whose interiors are closest to its centre.
+        for (slot, c, size) in [
+            (
+                5,
+                Candidate::TriangleSphere {
+                    triangle: [0, 1, 2],
+                    obstacle: 1,
+                },
+                9,
+            ),
+            (
+                6,
+                Candidate::EdgeSphere {
+                    edge: [0, 1],
+                    obstacle: 1,
+                },
+                6,
+            ),
+        ] {
+            let s = sorofem_core::contact::potential::candidate_distance(&mesh, &c, &p[..size / 3]);
+            let mut g = vec![0.0; size];
+            let active = potential.stencil_energy(
+                &mesh,
+                &c,
+                &p[..size / 3],
+                Some(&mut g),
+                None,
+                HessianMode::Exact,
+            ) > 0.0;
+            if active && s > 0.03 && s < 0.45 && counts[slot] < 15 {
+                check_stencil(&format!("{c:?}"), &potential, &mesh, &c, &x[..size]);
+                counts[slot] += 1;
+            }
         }
         for (slot, obstacle) in [(3, 0), (4, 1)] {
             let c = if obstacle == 0 {

@@ -329,3 +329,57 @@ fn max_step_keeps_the_whole_configuration_apart() {
         }
     }
 }
+
+/// A ball against a moving body triangle or edge: the returned time is never past a contact
+/// (checked on a fine sampling of the motion), and no time means the gap stays above eta d0.
+#[test]
+fn ball_against_moving_triangles_and_edges_is_conservative() {
+    let sphere = Sphere::try_new([0.0, 0.0, 0.0], 0.3).unwrap();
+    let mut rng = Rng::new(21);
+    let eta = 0.1;
+    let (mut hits, mut misses) = (0, 0);
+    let gap =
+        |t: &[Vec3; 3]| point_triangle_distance(&sphere.center, &t[0], &t[1], &t[2]).sqrt() - 0.3;
+    for _ in 0..400 {
+        let x: [Vec3; 3] = std::array::from_fn(|_| {
+            Vec3::new(rng.next(), rng.next(), rng.next()) * 0.4 + Vec3::new(0.0, 0.0, 0.6)
+        });
+        if gap(&x) <= 0.0 {
+            continue;
+        }
+        let push = Vec3::new(
+            0.2 * rng.next(),
+            0.2 * rng.next(),
+            -0.6 - 0.4 * rng.next().abs(),
+        );
+        let dx: [Vec3; 3] =
+            std::array::from_fn(|_| push + Vec3::new(rng.next(), rng.next(), rng.next()) * 0.1);
+        let at = |t: f64| -> [Vec3; 3] { std::array::from_fn(|a| x[a] + t * dx[a]) };
+        let first_contact = (0..=2000)
+            .map(|k| k as f64 / 2000.0)
+            .find(|&t| gap(&at(t)) <= 0.0);
+        match sphere_triangle_toi(&sphere, &x, &dx, eta) {
+            Some(t) => {
+                hits += 1;
+                assert!(gap(&at(t)) > 0.0, "the bound touches");
+                if let Some(contact) = first_contact {
+                    assert!(t <= contact, "{t} after the contact at {contact}");
+                }
+            }
+            None => {
+                misses += 1;
+                let lowest = (0..=2000)
+                    .map(|k| gap(&at(k as f64 / 2000.0)))
+                    .fold(f64::INFINITY, f64::min);
+                assert!(lowest >= eta * gap(&x) * 0.999, "missed: {lowest}");
+            }
+        }
+        let edge = [x[0], x[1]];
+        if let Some(t) = sphere_edge_toi(&sphere, &edge, &[dx[0], dx[1]], eta) {
+            let y = [edge[0] + t * dx[0], edge[1] + t * dx[1]];
+            let d = edge_edge_distance(&y[0], &y[1], &sphere.center, &sphere.center);
+            assert!(d.sqrt() > 0.3, "the edge bound touches");
+        }
+    }
+    assert!(hits > 50 && misses > 10, "{hits} hits, {misses} misses");
+}

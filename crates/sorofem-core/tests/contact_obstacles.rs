@@ -158,6 +158,19 @@ fn rest_intersections_name_the_obstacle_node_and_distance() {
         }
         other => panic!("{other:?}"),
     }
+    // A sphere dipping into the top face between its nodes: found on a triangle.
+    let (mesh, collision) = block_with(Obstacle::Sphere(
+        Sphere::try_new([0.025, 0.025, 0.11], 0.015).unwrap(),
+    ));
+    let x = collision.vertices(&mesh.rest_flat()).unwrap();
+    match find_intersection(&collision, &x) {
+        Some(Intersection::Triangle {
+            obstacle: 1,
+            distance,
+            ..
+        }) => assert!((distance + 0.005).abs() < 1e-12, "{distance}"),
+        other => panic!("{other:?}"),
+    }
     // A sphere inside the block touches no node: it is found inside the body.
     let (mesh, collision) = block_with(Obstacle::Sphere(
         Sphere::try_new([0.05, 0.05, 0.05], 0.01).unwrap(),

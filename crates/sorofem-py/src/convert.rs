@@ -521,3 +521,107 @@ fn legacy_param_key(name: &str) -> Option<&'static str> {
         _ => None,
     }
 }
+
+/// An obstacle description: a dict with "kind" and its geometry ("plane": "point", "normal";
+/// "sphere": "center", "radius"; "box": "center", "half_extents", "rotation" (3, 3 rows);
+/// "mesh": "vertices" (n, 3) float64, "triangles" (m, 3) int64), optionally "friction" (>= 0)
+/// and "path" ((k, 4) float64 rows `[t, dx, dy, dz]`, s and m).
+pub fn obstacle_spec(
+    index: usize,
+    item: &Bound<'_, PyAny>,
+) -> Result<sorofem_core::contact::ObstacleSpec, Error> {
+    use sorofem_core::contact::{Obstacle, ObstacleMesh, ObstacleSpec, Plane, Sphere};
+    let name = |key: &str| format!("obstacles[{index}].{key}");
+    let get = |key: &str| -> Result<Bound<'_, PyAny>, Error> {
+        item.get_item(key)
+            .map_err(|_| Error::invalid(&name(key), "a value", "nothing"))
+    };
+    let float = |key: &str| -> Result<f64, Error> {
+        let v = get(key)?;
+        v.extract::<f64>()
+            .map_err(|_| Error::shape(&name(key), "a number", describe(&v)))
+    };
+    let kind: String = get("kind")?.extract().map_err(|_| {
+        Error::invalid(
+            &name("kind"),
+            "\"plane\", \"sphere\", \"box\" or \"mesh\"",
+            "not a string",
+        )
+    })?;
+    let obstacle = match kind.as_str() {
+        "plane" => Obstacle::Plane(Plane::try_new(
+            vec3(&name("point"), &get("point")?)?,
+            vec3(&name("normal"), &get("normal")?)?,
+        )?),
+        "sphere" => Obstacle::Sphere(Sphere::try_new(
+            vec3(&name("center"), &get("center")?)?,
+            float("radius")?,
+        )?),
+        "box" => {
+            let rows = matrix(&name("rotation"), &get("rotation")?, Some(3))?;
+            if rows.len() != 3 {
+                return Err(Error::shape(
+                    &name("rotation"),
+                    "shape (3, 3)",
+                    format!("shape ({}, 3)", rows.len()),
+                ));
+            }
+            Obstacle::Mesh(ObstacleMesh::oriented_box(
+                vec3(&name("center"), &get("center")?)?,
+                vec3(&name("half_extents"), &get("half_extents")?)?,
+                [0, 1, 2].map(|r| [rows[r][0], rows[r][1], rows[r][2]]),
+            )?)
+        }
+        "mesh" => {
+            let triangles: PyReadonlyArray2<i64> = get("triangles")?.extract().map_err(|_| {
+                Error::shape(
+                    &name("triangles"),
+                    "an int64 array of shape (m, 3)",
+                    "another object",
+                )
+            })?;
+            if triangles.shape()[1] != 3 {
+                return Err(Error::shape(
+                    &name("triangles"),
+                    "shape (m, 3)",
+                    format!("shape {:?}", triangles.shape()),
+                ));
+            }
+            let triangles: Vec<[i64; 3]> = triangles
+                .as_array()
+                .rows()
+                .into_iter()
+                .map(|r| [r[0], r[1], r[2]])
+                .collect();
+            Obstacle::Mesh(ObstacleMesh::try_new(
+                points(&name("vertices"), &get("vertices")?)?,
+                &triangles,
+            )?)
+        }
+        other => {
+            return Err(Error::invalid(
+                &name("kind"),
+                "\"plane\", \"sphere\", \"box\" or \"mesh\"",
+                format!("{other:?}"),
+            ))
+        }
+    };
+    let friction = match item.get_item("friction") {
+        Ok(v) if !v.is_none() => v
+            .extract::<f64>()
+            .map_err(|_| Error::shape(&name("friction"), "a number", describe(&v)))?,
+        _ => 0.0,
+    };
+    let path = match item.get_item("path") {
+        Ok(v) if !v.is_none() => matrix(&name("path"), &v, Some(4))?
+            .into_iter()
+            .map(|row| (row[0], [row[1], row[2], row[3]]))
+            .collect(),
+        _ => Vec::new(),
+    };
+    Ok(ObstacleSpec {
+        obstacle,
+        friction,
+        path,
+    })
+}

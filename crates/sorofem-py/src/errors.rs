@@ -129,6 +129,8 @@ pub fn timings_to_dict<'py>(py: Python<'py>, timings: &Timings) -> PyResult<Boun
     t.set_item("solve", timings.solve)?;
     t.set_item("line_search", timings.line_search)?;
     t.set_item("failed_factorization", timings.failed_factorization)?;
+    t.set_item("contact", timings.contact)?;
+    t.set_item("step_bound", timings.step_bound)?;
     t.set_item("total", timings.total)?;
     Ok(t)
 }

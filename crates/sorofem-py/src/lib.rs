@@ -1,7 +1,8 @@
 //! `sorofem._core`: the Python face of sorofem-core. Plumbing only: conversions live in
 //! `convert`, error mapping in `errors`, and every class forwards to the core: `Mesh` (`mesh`),
-//! `Model` (`model`), `SolveOptions` (`options`).
+//! `Model` (`model`), `SolveOptions` (`options`); the obstacle and contact checks in `contact`.
 
+mod contact;
 mod convert;
 mod errors;
 mod mesh;
@@ -33,6 +34,9 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(mesh::rest_volumes, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::boundary_faces, m)?)?;
     m.add_function(wrap_pyfunction!(material_param_names, m)?)?;
+    m.add_function(wrap_pyfunction!(contact::_contact_reference, m)?)?;
+    m.add_function(wrap_pyfunction!(contact::check_obstacle, m)?)?;
+    m.add_function(wrap_pyfunction!(contact::check_contact, m)?)?;
     m.add_class::<mesh::Mesh>()?;
     m.add_class::<model::Model>()?;
     m.add_class::<options::SolveOptions>()?;

@@ -5,7 +5,7 @@ use crate::convert;
 use crate::errors::{guarded, report_to_dict, timings_to_dict, to_py, IntoPyResult};
 use crate::mesh::Mesh;
 use crate::options::SolveOptions;
-use numpy::{PyArray1, PyArrayMethods};
+use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use sorofem_core::{Material, SolveOptions as CoreOptions, TetMesh};
@@ -248,7 +248,98 @@ impl Model {
             Some(p) => out.set_item("pressure", PyArray1::from_vec(py, p))?,
             None => out.set_item("pressure", py.None())?,
         }
+        match &solution.contact {
+            Some(contact) => {
+                let d = crate::contact::forces_to_dict(py, &contact.forces)?;
+                d.set_item("stiffness", contact.stiffness)?;
+                d.set_item("dhat", contact.dhat)?;
+                d.set_item(
+                    "iterate_min_distances",
+                    contact.iterate_min_distances.clone(),
+                )?;
+                out.set_item("contact", d)?
+            }
+            None => out.set_item("contact", py.None())?,
+        }
         Ok(out)
+    }
+
+    /// Sets (replaces) the obstacles: a list of dicts (see the binding's `obstacle_spec`:
+    /// "kind" and its geometry, "friction", "path"), the activation distance `dhat` (m), the
+    /// reference barrier stiffness (J/m^4), the static friction slip (m) and the dynamic friction
+    /// velocity (m/s); `None` takes the core's defaults. An empty list removes contact.
+    #[pyo3(signature = (obstacles, dhat = None, stiffness = None, friction_slip = None, friction_velocity = None))]
+    fn set_contact(
+        &mut self,
+        py: Python<'_>,
+        obstacles: &Bound<'_, PyList>,
+        dhat: Option<f64>,
+        stiffness: Option<f64>,
+        friction_slip: Option<f64>,
+        friction_velocity: Option<f64>,
+    ) -> PyResult<()> {
+        let setup = sorofem_core::contact::ContactSetup {
+            obstacles: crate::contact::obstacle_specs(py, obstacles)?,
+            dhat,
+            stiffness,
+            friction_slip,
+            friction_velocity,
+        };
+        let inner = &mut self.inner;
+        guarded(py, || inner.set_contact(setup))
+    }
+
+    /// The contact settings in force: {"dhat": m, "stiffness": J/m^4 or None before the first
+    /// solve, "n_obstacles"}, or None without obstacles.
+    fn contact_settings<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(contact) = self.inner.contact() else {
+            return Ok(None);
+        };
+        let d = PyDict::new(py);
+        d.set_item("dhat", contact.dhat())?;
+        d.set_item("stiffness", contact.reference_stiffness())?;
+        d.set_item("n_obstacles", contact.n_obstacles())?;
+        Ok(Some(d))
+    }
+
+    /// Contact forces at node positions (n, 3), m: a dict with "forces" (n, 3) and
+    /// "obstacle_forces" (k, 3) in N (exerted on the body), "min_distance" (k,) m (NaN: nothing
+    /// near), "active" (k,); None without obstacles.
+    fn contact_forces<'py>(
+        &self,
+        py: Python<'py>,
+        positions: &Bound<'py, PyAny>,
+    ) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let positions: Vec<f64> = convert::points("positions", positions)
+            .py(py)?
+            .into_iter()
+            .flatten()
+            .collect();
+        let inner = &self.inner;
+        match guarded(py, || inner.contact_forces(&positions))? {
+            Some(forces) => Ok(Some(crate::contact::forces_to_dict(py, &forces)?)),
+            None => Ok(None),
+        }
+    }
+
+    /// `d(w . F_k)/dx` (n, 3) at the last equilibrium: the gradient of the force obstacle
+    /// `obstacle` exerts on the body, along `weights` (3,), with respect to the node positions.
+    fn contact_force_gradient<'py>(
+        &self,
+        py: Python<'py>,
+        obstacle: usize,
+        weights: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let w = convert::vec3("weights", weights).py(py)?;
+        let inner = &self.inner;
+        let g = guarded(py, || inner.contact_force_gradient(obstacle, w))?;
+        Ok(convert::points_to_numpy(py, &g))
+    }
+
+    /// Checks every accepted Newton iterate for intersections in full (a test diagnostic): one
+    /// records a minimum distance of -inf.
+    fn set_contact_audit(&mut self, on: bool) {
+        self.inner.set_contact_audit(on);
     }
 
     /// Implicit Euler dynamics; returns a dict with "times", "positions" (frames, n, 3),
@@ -343,6 +434,15 @@ impl Model {
         out.set_item("factorizations", trajectory.factorizations)?;
         out.set_item("residuals", trajectory.residuals)?;
         out.set_item("cutbacks", trajectory.cutbacks)?;
+        if !trajectory.contact.is_empty() {
+            let contact = crate::contact::trajectory_to_dict(
+                py,
+                &trajectory.contact,
+                &trajectory.iterate_min_distances,
+                n,
+            )?;
+            out.set_item("contact", contact)?;
+        }
         out.set_item("timings", timings_to_dict(py, &trajectory.timings)?)?;
         Ok(out)
     }

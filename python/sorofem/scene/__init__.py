@@ -42,8 +42,8 @@ Schema
     volumetric = "log"         # volumetric measure c(J): ln J ("log") or J - 1 ("linear")
     pressure_mass = "consistent"   # pressure mass matrix of the mixed formulation
 
-    [[fixed]]                  # required, at least 1: Supports: exactly one of nodes or box; each entry must
-                               # select at least one node.
+    [[fixed]]                  # optional: Supports: exactly one of nodes or box; each entry must select at least
+                               # one node.
     # nodes = [0, 1, 2]        # node indices, 0-based
     box = { min = [-1e-9, -1, -1], max = [1e-9, 1, 1] }   # the nodes inside this closed box, m
     displacement = [0, 0, 0]   # prescribed displacement of the selected nodes, m
@@ -74,6 +74,23 @@ Schema
     free_node_mass = 0         # mass of each free node, kg
     damping = 0                # dashpot of each segment: a force damping * dL/dt in time integration (static
                                # solves are unaffected), N s/m
+
+    [[obstacle]]               # optional: A rigid obstacle the body cannot pass through (contact by Incremental
+                               # Potential Contact, optional Coulomb friction): exactly one of plane, sphere, box
+                               # or mesh.
+    plane = { point = [0, 0, -0.06], normal = [0, 0, 1] }   # a half-space (a floor, a wall), m
+    # sphere = { center = [0.3, 0.05, -0.1], radius = 0.03 }   # a solid ball, m
+    # box = { min = [0.3, 0, -0.2], max = [0.4, 0.1, -0.1] }   # a solid axis-aligned box (sorofem.Box), m
+    # mesh = { file = "cup.stl", scale = 0.001 }   # a triangle surface from a file
+    friction = 0.5             # Coulomb friction coefficient between this obstacle and the body (default 0)
+    # path = [[0, 0, 0, 0], [0.5, 0, 0, 0.02]]   # keyframes of a prescribed translation, linearly interpolated
+                                                 # and held outside their range, followed with [dynamics] (static
+                                                 # solves use t = 0), s, m
+
+    [contact]                  # optional: Contact settings for the [[obstacle]] entries
+                               # (sorofem.Body.set_contact).
+    # dhat = 0.0001            # activation distance of the contact barrier: the body rests a fraction of it away
+                               # from an obstacle (default: 1 % of the mean boundary edge length), m
 
     [dynamics]                 # optional: Integrate in time (implicit Euler, lumped mass; density > 0) instead of
                                # a static solve.

@@ -19,12 +19,14 @@ from ..io import read_mesh, read_points
 from ..materials import Material, material_class
 from ..mesh import Mesh
 from ..meshing import INSTALL_HINT, MESHER, mesher_available, tetrahedralize
+from ..obstacles import Box, Obstacle, Plane, Sphere
 from ..plot import COLOR_FIELDS
 from ..targets import Target
 from ._keys import CABLE_OPTIONS, MATERIAL_KEYS
 from ._spec import Checker, quoted
 
-__all__ = ["build_mesh", "build_material", "apply_fixed", "apply_loads", "apply_cables", "build_dynamics",
+__all__ = ["build_mesh", "build_material", "apply_fixed", "apply_loads", "apply_cables", "apply_obstacles",
+           "build_dynamics",
            "build_output", "build_target", "build_estimate", "build_control"]
 
 
@@ -224,6 +226,45 @@ def apply_loads(check: Checker, table: dict[str, Any], body: Body) -> np.ndarray
     for i, entry in enumerate(table["forces"]):
         body.add_force(_select_nodes(check, entry, f"loads.forces[{i}]", body.mesh), entry["force"])
     return np.array(table["gravity"])
+
+
+def apply_obstacles(
+    check: Checker, entries: list[dict[str, Any]], contact: dict[str, Any], body: Body, base: Path
+) -> list[Path]:
+    """Build each ``[[obstacle]]`` entry and add it to ``body`` with the ``[contact]`` settings;
+    returns the surface files read."""
+    files = []
+    try:
+        body.set_contact(**contact)
+    except ParameterError as exc:
+        raise check.error(f"contact.{exc.parameter or 'dhat'}", str(exc)) from None
+    for i, entry in enumerate(entries):
+        prefix = f"obstacle[{i}]"
+        obstacle: Obstacle
+        if "plane" in entry:
+            key = f"{prefix}.plane"
+            make = lambda: Plane(entry["plane"]["point"], entry["plane"]["normal"])  # noqa: E731
+        elif "sphere" in entry:
+            key = f"{prefix}.sphere"
+            make = lambda: Sphere(entry["sphere"]["center"], entry["sphere"]["radius"])  # noqa: E731
+        elif "box" in entry:
+            key = f"{prefix}.box"
+            make = lambda: Box(entry["box"]["min"], entry["box"]["max"])  # noqa: E731
+        else:
+            key = f"{prefix}.mesh.file"
+            table = entry["mesh"]
+            file = _file(check, key, table["file"], base, "surface file")
+            files.append(file)
+            make = lambda: Obstacle.mesh(file, table["scale"], one_sided=table["one_sided"])  # noqa: E731
+        try:
+            obstacle = make()
+        except InputError as exc:
+            raise check.error(key, str(exc)) from None
+        try:
+            body.add_obstacle(obstacle, entry["friction"], path=entry["path"])
+        except InputError as exc:
+            raise check.error(prefix, str(exc)) from None
+    return files
 
 
 def apply_cables(check: Checker, entries: list[dict[str, Any]], body: Body) -> list[Cable]:

@@ -298,6 +298,76 @@ _CABLE = Table(
     "+ divisions.",
 )
 
+_OBSTACLE = Table(
+    {
+        "plane": Field(
+            Table(
+                {
+                    "point": Field(_VEC3, "a point of the plane", "m", required=True),
+                    "normal": Field(_VEC3, "normal (any length > 0), pointing towards the body", required=True),
+                },
+                hint=" like { point = [x, y, z], normal = [nx, ny, nz] }",
+                doc="A half-space: the body stays on the side the normal points to (sorofem.Plane).",
+            ),
+            "a half-space (a floor, a wall)", "m", example={"point": [0, 0, -0.06], "normal": [0, 0, 1]},
+        ),
+        "sphere": Field(
+            Table(
+                {
+                    "center": Field(_VEC3, "centre", "m", required=True),
+                    "radius": Field(Number(Range(gt=0)), "radius", "m", required=True),
+                },
+                hint=" like { center = [x, y, z], radius = r }",
+                doc="A solid ball (sorofem.Sphere).",
+            ),
+            "a solid ball", "m", example={"center": [0.3, 0.05, -0.1], "radius": 0.03}, commented=True,
+        ),
+        "box": Field(_box("the solid"), "a solid axis-aligned box (sorofem.Box)", "m",
+                     example={"min": [0.3, 0.0, -0.2], "max": [0.4, 0.1, -0.1]}, commented=True),
+        "mesh": Field(
+            Table(
+                {
+                    "file": Field(String(), "triangle surface file (STL, OBJ, PLY, ...), relative to the scene file",
+                                  required=True),
+                    "scale": Field(Number(Range(gt=0)), "multiplies its coordinates", default=1.0),
+                    "one_sided": Field(Boolean(), "accept an open surface as a sheet the body cannot cross",
+                                       default=False),
+                },
+                hint=" like { file = \"cup.stl\", scale = 0.001 }",
+                doc="A rigid triangle surface (sorofem.Obstacle.mesh): closed, or open with one_sided = true.",
+            ),
+            "a triangle surface from a file", example={"file": "cup.stl", "scale": 0.001}, commented=True,
+        ),
+        "friction": Field(Number(Range(ge=0)), "Coulomb friction coefficient between this obstacle and the body",
+                          default=0.0, example=0.5),
+        "path": Field(
+            Array(Tuple((Number(), Number(), Number(), Number()), "[t, dx, dy, dz]"), 1,
+                  noun="[t, dx, dy, dz] keyframes"),
+            "keyframes of a prescribed translation, linearly interpolated and held outside their range, followed "
+            "with [dynamics] (static solves use t = 0)", "s, m", default=None,
+            example=[[0.0, 0, 0, 0], [0.5, 0, 0, 0.02]], commented=True,
+        ),
+    },
+    choices=(Choice((Group(("plane",)), Group(("sphere",)), Group(("box",)), Group(("mesh",)))),),
+    doc="A rigid obstacle the body cannot pass through (contact by Incremental Potential Contact, optional "
+    "Coulomb friction): exactly one of plane, sphere, box or mesh.",
+)
+
+_CONTACT = Table(
+    {
+        "dhat": Field(Number(Range(gt=0)), "activation distance of the contact barrier: the body rests a fraction "
+                      "of it away from an obstacle (default: 1 % of the mean boundary edge length)", "m",
+                      default=None, example=1e-4, commented=True),
+        "stiffness": Field(Number(Range(gt=0)), "reference barrier stiffness (default: from the material at the "
+                           "first solve)", "J/m^4", default=None),
+        "friction_slip": Field(Number(Range(gt=0)), "static solves: slip over a load step below which friction "
+                               "sticks (default dhat / 10)", "m", default=None),
+        "friction_velocity": Field(Number(Range(gt=0)), "dynamics: sliding speed below which friction sticks",
+                                   "m/s", default=None),
+    },
+    doc="Contact settings for the [[obstacle]] entries (sorofem.Body.set_contact).",
+)
+
 _DYNAMICS = Table(
     {
         "dt": Field(Number(Range(gt=0)), "time step", "s", required=True, example=0.01),
@@ -415,14 +485,16 @@ SCENE = Table(
         "material": Field(_MATERIAL, "the material", required=True, missing="a scene needs a [material] table"),
         "formulation": Field(_FORMULATION, "the formulation"),
         "fixed": Field(
-            Tables(_FIXED, "fixed", min_items=1, note=": an unsupported body has no equilibrium"),
-            "[[fixed]] entries: supports and prescribed displacements",
-            required=True,
-            missing="a scene needs a [[fixed]] entry",
+            Tables(_FIXED, "fixed"),
+            "[[fixed]] entries: supports and prescribed displacements (a body without any must rest on "
+            "[[obstacle]] entries)",
+            default=[],
         ),
         "loads": Field(_LOADS, "gravity and nodal forces"),
         "solver": Field(_SOLVER, "Newton options"),
         "cable": Field(Tables(_CABLE, "cable"), "[[cable]] entries", default=[]),
+        "obstacle": Field(Tables(_OBSTACLE, "obstacle"), "[[obstacle]] entries: rigid obstacles", default=[]),
+        "contact": Field(_CONTACT, "contact settings"),
         "dynamics": Field(_DYNAMICS, "time integration instead of a static solve"),
         "target": Field(_TARGET, "target of sorofem estimate / control"),
         "estimate": Field(_ESTIMATE, "sorofem estimate options"),

@@ -26,6 +26,7 @@ from ..targets import Target
 from ._build import (
     apply_cables,
     apply_fixed,
+    apply_obstacles,
     apply_loads,
     build_control,
     build_dynamics,
@@ -47,7 +48,7 @@ PER_SOLVE_CABLE_KEYS = ("actuation", "stiffness")
 def structure_key(data: Mapping[str, Any]) -> str:
     """The tables a scene's expensive objects are built from, as one JSON string: the mesh, the
     formulation, the supports, the nodal forces, the cables (all but their actuation and
-    stiffness), the material model and the target.
+    stiffness), the material model, the target, the obstacles and the contact settings.
 
     Two scenes whose checked tables give the same key differ only in values a built model takes
     at each solve (material values, actuations, cable stiffnesses, gravity, solver and dynamics
@@ -62,6 +63,8 @@ def structure_key(data: Mapping[str, Any]) -> str:
         "cable": cables,
         "material_model": (data.get("material") or {}).get("model"),
         "target": data.get("target"),
+        "obstacle": data.get("obstacle"),
+        "contact": data.get("contact"),
     }
     return json.dumps(parts, sort_keys=True, default=str)
 
@@ -203,7 +206,7 @@ class Scene:
         # Structure, types, ranges and allowed values (everything json_schema() says), with
         # defaults filled in; then what needs the mesh and the other files.
         data = SCENE.check(check, raw, "")
-        for name in ("formulation", "loads", "solver", "output"):
+        for name in ("formulation", "loads", "solver", "output", "contact"):
             if name not in data:
                 data[name] = SCENE.fields[name].spec.check(check, {}, name)
         structure = structure_key(data)
@@ -221,6 +224,12 @@ class Scene:
                     else Body(mesh, material, formulation=formulation, **options))
         except ParameterError as exc:
             raise check.error(f"material.{exc.parameter or 'youngs_modulus'}", str(exc)) from None
+        if not data["fixed"] and not data["obstacle"]:
+            raise check.error("fixed", "missing: a scene needs a [[fixed]] entry, or [[obstacle]] entries for an "
+                              "unsupported body to rest on (an unsupported body in empty space has no equilibrium)")
+        # A body lent by ``like`` has its supports, cables and obstacles (they are in the
+        # structure); their files are among its input files, which the target's take over.
+        obstacle_files: list[Path] = []
         if like is not None:
             gravity, cables = np.array(data["loads"]["gravity"]), like.cables
             for c, entry in enumerate(data["cable"]):
@@ -230,6 +239,7 @@ class Scene:
             apply_fixed(check, data["fixed"], body)
             gravity = apply_loads(check, data["loads"], body)
             cables = apply_cables(check, data["cable"], body)
+            obstacle_files = apply_obstacles(check, data["obstacle"], data["contact"], body, path.parent)
         dynamics = build_dynamics(check, data["dynamics"], body) if "dynamics" in data else None
         target, target_files = None, []
         if like is not None:
@@ -257,7 +267,7 @@ class Scene:
             regions=regions,
             material_region=owner,
             output=output,
-            input_files=[p for p in (path, mesh.source, *target_files) if p is not None],
+            input_files=[p for p in (path, mesh.source, *target_files, *obstacle_files) if p is not None],
             structure=structure,
         )
 
@@ -327,6 +337,8 @@ class Scene:
             "fixed_nodes": int(self.body.fixed_nodes.size),
             "solver": self.solve_options.to_dict(),
             "cables": [c.to_dict() for c in self.cables],
+            "obstacles": [o.to_dict() for o in self.body.obstacles],
+            "contact": self.body.contact_settings,
             "dynamics": None if self.dynamics is None else {
                 **self.dynamics,
                 "actuation": None if self.dynamics["actuation"] is None else [

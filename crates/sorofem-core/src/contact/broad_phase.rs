@@ -10,7 +10,8 @@
 //! `inflation`, which includes every pair that collides on the way.
 //!
 //! Pairs: body vertex - obstacle triangle, obstacle vertex - body triangle, body edge - obstacle
-//! edge, body vertex - analytic obstacle, and with self-contact body vertex - body triangle and
+//! edge, body vertex - analytic obstacle, body triangle and edge - ball, and with self-contact
+//! body vertex - body triangle and
 //! body edge - body edge, leaving out the adjacent ones (a vertex of the triangle, edges sharing a
 //! vertex).
 
@@ -262,6 +263,7 @@ pub fn swept_candidates(
             found
         })
         .collect();
+    sphere_candidates(mesh, &body_faces, &body_edges, inflation, &mut out);
     out.par_extend(mesh.obstacle_vertices().par_iter().flat_map_iter(|&v| {
         let query = boxes.vertex(v).inflated(inflation);
         let mut found = Vec::new();
@@ -326,6 +328,9 @@ pub fn brute_force_candidates(
             }
         }
     }
+    let body_faces: Vec<Aabb> = mesh.body_faces().iter().map(|f| boxes.face(f)).collect();
+    let body_edges: Vec<Aabb> = mesh.body_edges().iter().map(|e| boxes.edge(e)).collect();
+    sphere_candidates(mesh, &body_faces, &body_edges, inflation, &mut out);
     for &v in mesh.obstacle_vertices() {
         let query = boxes.vertex(v).inflated(inflation);
         for &triangle in mesh.body_faces() {
@@ -350,6 +355,40 @@ pub fn brute_force_candidates(
         }
     }
     out
+}
+
+/// Body triangles and edges whose (inflated) boxes come within each ball: a few balls against
+/// the surface, tested directly.
+fn sphere_candidates(
+    mesh: &CollisionMesh,
+    face_boxes: &[Aabb],
+    edge_boxes: &[Aabb],
+    inflation: f64,
+    out: &mut Vec<Candidate>,
+) {
+    for (k, obstacle) in mesh.obstacles().iter().enumerate() {
+        let Obstacle::Sphere(sphere) = obstacle else {
+            continue;
+        };
+        let near =
+            |aabb: &Aabb| aabb.inflated(inflation).point_distance(&sphere.center) <= sphere.radius;
+        for (triangle, aabb) in mesh.body_faces().iter().zip(face_boxes) {
+            if near(aabb) {
+                out.push(Candidate::TriangleSphere {
+                    triangle: *triangle,
+                    obstacle: k,
+                });
+            }
+        }
+        for (edge, aabb) in mesh.body_edges().iter().zip(edge_boxes) {
+            if near(aabb) {
+                out.push(Candidate::EdgeSphere {
+                    edge: *edge,
+                    obstacle: k,
+                });
+            }
+        }
+    }
 }
 
 fn shares_vertex(a: &[usize; 2], b: &[usize; 2]) -> bool {

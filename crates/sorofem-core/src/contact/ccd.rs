@@ -11,7 +11,9 @@
 //! A stencil already touching (distance <= 0) returns `Some(0)`.
 
 use super::collision_mesh::{Candidate, CollisionMesh};
-use super::distance::{edge_edge_distance, point_triangle_distance, Vec3};
+use super::distance::{
+    edge_edge_distance, feature_distance, point_edge_feature, point_triangle_distance, Vec3,
+};
 use super::obstacle::{Plane, Sphere};
 use rayon::prelude::*;
 
@@ -72,6 +74,36 @@ pub fn edge_edge_toi(x: &[Vec3; 4], dx: &[Vec3; 4], eta: f64) -> Option<f64> {
     let rate = d[0].norm().max(d[1].norm()) + d[2].norm().max(d[3].norm());
     additive_ccd(x, &d, rate, eta, |y| {
         edge_edge_distance(&y[0], &y[1], &y[2], &y[3])
+    })
+}
+
+/// Additive CCD of a ball (fixed) against a body triangle `x` moving by `dx`: the gap is the
+/// distance from the centre to the triangle minus the radius, and it shrinks no faster than the
+/// fastest vertex moves.
+pub fn sphere_triangle_toi(
+    sphere: &Sphere,
+    x: &[Vec3; 3],
+    dx: &[Vec3; 3],
+    eta: f64,
+) -> Option<f64> {
+    let rate = dx.iter().map(|d| d.norm()).fold(0.0, f64::max);
+    let y = [sphere.center, x[0], x[1], x[2]];
+    let dy = [Vec3::zeros(), dx[0], dx[1], dx[2]];
+    additive_ccd(&y, &dy, rate, eta, |y| {
+        let gap = point_triangle_distance(&y[0], &y[1], &y[2], &y[3]).sqrt() - sphere.radius;
+        gap.max(0.0).powi(2)
+    })
+}
+
+/// [`sphere_triangle_toi`] for a body edge `x` moving by `dx`.
+pub fn sphere_edge_toi(sphere: &Sphere, x: &[Vec3; 2], dx: &[Vec3; 2], eta: f64) -> Option<f64> {
+    let rate = dx[0].norm().max(dx[1].norm());
+    let y = [sphere.center, x[0], x[1], x[1]];
+    let dy = [Vec3::zeros(), dx[0], dx[1], dx[1]];
+    additive_ccd(&y, &dy, rate, eta, |y| {
+        let feature = point_edge_feature(&y[0], &y[1], &y[2], [0, 1, 2]);
+        let gap = feature_distance(&feature, &[&y[0], &y[1], &y[2]]).sqrt() - sphere.radius;
+        gap.max(0.0).powi(2)
     })
 }
 
@@ -136,6 +168,15 @@ pub fn candidate_toi(
         }
         Candidate::PointSphere { obstacle, .. } => {
             point_sphere_toi(&p[0], &d[0], mesh.sphere(obstacle), eta)
+        }
+        Candidate::TriangleSphere { obstacle, .. } => sphere_triangle_toi(
+            mesh.sphere(obstacle),
+            &[p[0], p[1], p[2]],
+            &[d[0], d[1], d[2]],
+            eta,
+        ),
+        Candidate::EdgeSphere { obstacle, .. } => {
+            sphere_edge_toi(mesh.sphere(obstacle), &[p[0], p[1]], &[d[0], d[1]], eta)
         }
     }
 }

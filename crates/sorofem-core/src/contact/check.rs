@@ -46,6 +46,13 @@ pub enum Intersection {
     },
     /// A point of the obstacle (a mesh vertex, a sphere's centre) lies inside the body.
     InsideBody { obstacle: usize, point: Vec3 },
+    /// A ball meets body triangle `triangle` between its vertices: the distance from its
+    /// centre to the triangle minus its radius is `distance <= 0` (m).
+    Triangle {
+        obstacle: usize,
+        triangle: [usize; 3],
+        distance: f64,
+    },
 }
 
 impl Intersection {
@@ -53,7 +60,8 @@ impl Intersection {
         match self {
             Intersection::Node { obstacle, .. }
             | Intersection::EdgeTriangle { obstacle, .. }
-            | Intersection::InsideBody { obstacle, .. } => *obstacle,
+            | Intersection::InsideBody { obstacle, .. }
+            | Intersection::Triangle { obstacle, .. } => *obstacle,
         }
     }
 }
@@ -67,6 +75,12 @@ impl fmt::Display for Intersection {
             Intersection::EdgeTriangle { edge, triangle, .. } => {
                 write!(f, "edge {edge:?} crossing triangle {triangle:?}")
             }
+            Intersection::Triangle {
+                triangle, distance, ..
+            } => write!(
+                f,
+                "body triangle {triangle:?} at signed distance {distance:.3e} m"
+            ),
             Intersection::InsideBody { point, .. } => write!(
                 f,
                 "obstacle point ({:.4e}, {:.4e}, {:.4e}) m inside the body",
@@ -102,6 +116,19 @@ pub fn find_intersection(mesh: &CollisionMesh, x: &[Vec3]) -> Option<Intersectio
                         obstacle: k,
                         node: v,
                         distance,
+                    })
+                })
+                .or_else(|| {
+                    mesh.body_faces().iter().find_map(|t| {
+                        let distance =
+                            point_triangle_distance(&sphere.center, &x[t[0]], &x[t[1]], &x[t[2]])
+                                .sqrt()
+                                - sphere.radius;
+                        (distance <= 0.0).then_some(Intersection::Triangle {
+                            obstacle: k,
+                            triangle: *t,
+                            distance,
+                        })
                     })
                 })
                 .or_else(|| {

@@ -13,8 +13,8 @@ use crate::mesh::TetMesh;
 
 /// One stencil of the contact potential: a pair of primitives that may come within `dhat`.
 /// Vertex ids follow the numbering of [`CollisionMesh`]; `obstacle` indexes
-/// [`CollisionMesh::obstacles`] and must name a plane (`PointPlane`) or a sphere (`PointSphere`),
-/// as the broad phase makes them (the kernels panic otherwise).
+/// [`CollisionMesh::obstacles`] and must name a plane (`PointPlane`) or a sphere (the `...Sphere`
+/// stencils), as the broad phase makes them (the kernels panic otherwise).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Candidate {
     /// A vertex and a triangle (body vertex vs body or obstacle triangle, or obstacle vertex vs
@@ -26,11 +26,31 @@ pub enum Candidate {
     PointPlane { point: usize, obstacle: usize },
     /// A body vertex and the analytic ball `obstacles[obstacle]`.
     PointSphere { point: usize, obstacle: usize },
+    /// A body triangle and the analytic ball `obstacles[obstacle]`: active when the ball's
+    /// centre projects inside the triangle (otherwise an edge or a vertex is closest, and their
+    /// own stencils count it), so that a ball cannot slip between the vertices of a coarse
+    /// surface.
+    TriangleSphere {
+        triangle: [usize; 3],
+        obstacle: usize,
+    },
+    /// A body edge and the analytic ball `obstacles[obstacle]`: active when the centre projects
+    /// inside the edge.
+    EdgeSphere { edge: [usize; 2], obstacle: usize },
 }
 
 impl Candidate {
+    /// A hash of a set of stencils, whatever their order: equal for the same stencils.
+    pub fn fingerprint(stencils: impl Iterator<Item = Candidate>) -> u64 {
+        let mut sorted: Vec<Candidate> = stencils.collect();
+        sorted.sort_unstable();
+        let mut hasher = std::collections::hash_map::DefaultHasher::new();
+        std::hash::Hash::hash(&sorted, &mut hasher);
+        std::hash::Hasher::finish(&hasher)
+    }
+
     /// The stencil's vertex ids (the first `n` entries of the array are used): `[p, t0, t1, t2]`,
-    /// `[a0, a1, b0, b1]`, or `[p]`.
+    /// `[a0, a1, b0, b1]`, `[p]`, `[t0, t1, t2]` or `[e0, e1]`.
     pub fn vertices(&self) -> ([usize; 4], usize) {
         match *self {
             Candidate::PointTriangle { point, triangle: t } => ([point, t[0], t[1], t[2]], 4),
@@ -38,6 +58,8 @@ impl Candidate {
             Candidate::PointPlane { point, .. } | Candidate::PointSphere { point, .. } => {
                 ([point, 0, 0, 0], 1)
             }
+            Candidate::TriangleSphere { triangle: t, .. } => ([t[0], t[1], t[2], 0], 3),
+            Candidate::EdgeSphere { edge: e, .. } => ([e[0], e[1], 0, 0], 2),
         }
     }
 
@@ -144,7 +166,8 @@ impl CollisionMesh {
         self.rest.len()
     }
 
-    /// Rest positions of all vertices (m).
+    /// Positions of all vertices at rest (m): the body's rest nodes, then the obstacles' vertices
+    /// where this geometry holds them.
     pub fn rest(&self) -> &[Vec3] {
         &self.rest
     }
@@ -214,8 +237,37 @@ impl CollisionMesh {
         }
     }
 
-    /// Positions of all vertices: the body's from `body` (flat, `3 n_body`, m), the obstacles' at
-    /// rest (static obstacles).
+    /// The same geometry with obstacle `k` translated by `translations[k]` (m): its mesh
+    /// vertices, a plane's point, a sphere's centre. The body is unchanged. Moving obstacles
+    /// follow prescribed paths this way, one copy per time step.
+    pub fn moved(&self, translations: &[Vec3]) -> Self {
+        assert_eq!(
+            translations.len(),
+            self.obstacles.len(),
+            "one translation per obstacle"
+        );
+        let mut out = self.clone();
+        for (k, (obstacle, t)) in out.obstacles.iter_mut().zip(translations).enumerate() {
+            match obstacle {
+                Obstacle::Plane(plane) => plane.point += t,
+                Obstacle::Sphere(sphere) => sphere.center += t,
+                Obstacle::Mesh(mesh) => {
+                    let (_, offset) = self
+                        .mesh_obstacle_offsets
+                        .iter()
+                        .find(|(index, _)| *index == k)
+                        .expect("every mesh obstacle has an offset");
+                    for v in &mut out.rest[*offset..offset + mesh.vertices().len()] {
+                        *v += t;
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// Positions of all vertices: the body's from `body` (flat, `3 n_body`, m), the obstacles'
+    /// where this geometry holds them (see [`CollisionMesh::moved`]).
     pub fn vertices(&self, body: &[f64]) -> Result<Vec<Vec3>> {
         if body.len() != 3 * self.n_body {
             return Err(Error::shape(

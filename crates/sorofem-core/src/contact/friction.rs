@@ -13,7 +13,9 @@
 
 use super::barrier::normal_force_magnitude;
 use super::collision_mesh::{Candidate, CollisionMesh};
-use super::distance::{edge_edge_feature, point_triangle_feature, Feature, Vec3};
+use super::distance::{
+    edge_edge_feature, point_edge_feature, point_triangle_feature, Feature, Vec3,
+};
 use super::potential::{candidate_squared_distance, BarrierPotential};
 use crate::energy::HessianMode;
 use nalgebra::{Matrix2, Matrix3x2, SymmetricEigen, Vector2};
@@ -108,6 +110,26 @@ impl FrictionStencil {
                 [1.0, 0.0, 0.0, 0.0],
                 complement_basis(&(p[0] - mesh.sphere(obstacle).center)),
             ),
+            // Ball stencils carry friction where they carry the barrier: when the centre
+            // projects inside the feature. The centre is fixed: its weight drops out.
+            Candidate::TriangleSphere { obstacle, .. } => {
+                let q = [mesh.sphere(obstacle).center, p[0], p[1], p[2]];
+                let feature = point_triangle_feature(&q[0], &q[1], &q[2], &q[3]);
+                if !matches!(feature, Feature::PointPlane(_)) {
+                    return None;
+                }
+                let (w, basis) = feature_frame(&feature, &q);
+                ([w[1], w[2], w[3], 0.0], basis)
+            }
+            Candidate::EdgeSphere { obstacle, .. } => {
+                let q = [mesh.sphere(obstacle).center, p[0], p[1], p[1]];
+                let feature = point_edge_feature(&q[0], &q[1], &q[2], [0, 1, 2]);
+                if !matches!(feature, Feature::PointLine(_)) {
+                    return None;
+                }
+                let (w, basis) = feature_frame(&feature, &q);
+                ([w[1], w[2], 0.0, 0.0], basis)
+            }
         };
         Some(FrictionStencil {
             candidate: *candidate,

@@ -7,7 +7,9 @@
 //! stiffness), [`obstacle`] (planes, spheres, triangle surfaces), [`collision_mesh`] (the
 //! body's surface and its obstacles in one vertex numbering; the [`Candidate`] stencils),
 //! [`broad_phase`], [`potential`] (barrier energy per stencil), [`friction`], [`ccd`] (time of
-//! impact and the largest safe step) and [`check`] (minimum distance, rest intersections).
+//! impact and the largest safe step), [`check`] (minimum distance, rest intersections) and
+//! [`term`] (contact as a term of a model: the barrier and lagged friction added into the free
+//! DOFs, the CCD step bound, the stiffness updates, the contact forces).
 //!
 //! Positions are in m; the barrier acts on squared distances (m^2), with activation distance
 //! `dhat` (m).
@@ -22,6 +24,7 @@ pub mod friction;
 pub mod obstacle;
 pub mod potential;
 mod psd;
+pub mod term;
 
 pub use barrier::StiffnessBounds;
 pub use collision_mesh::{Candidate, CollisionMesh};
@@ -29,3 +32,4 @@ pub use distance::{Feature, Vec3};
 pub use obstacle::{Obstacle, ObstacleMesh, Plane, Sphere};
 pub use potential::BarrierPotential;
 pub use psd::{project_to_psd, project_translation_invariant_to_psd, symmetric_eigen};
+pub use term::{ContactForces, ContactSetup, ContactTerm, ObstacleSpec};

@@ -12,11 +12,11 @@ use super::collision_mesh::{Candidate, CollisionMesh};
 use super::distance::{
     edge_edge_feature, edge_edge_mollifier, edge_edge_mollifier_derivatives,
     edge_edge_mollifier_threshold, feature_distance, feature_distance_derivatives,
-    line_line_distance_derivatives, point_line_distance_derivatives,
+    line_line_distance_derivatives, point_edge_feature, point_line_distance_derivatives,
     point_plane_distance_derivatives, point_point_distance_derivatives, point_triangle_feature,
     Derivatives, Feature, Vec3,
 };
-use super::psd::project_translation_invariant_to_psd;
+use super::psd::{project_to_psd, project_translation_invariant_to_psd};
 use crate::energy::HessianMode;
 use crate::error::{Error, Result};
 use nalgebra::Matrix3;
@@ -181,7 +181,79 @@ impl BarrierPotential {
                 }
                 self.radial_barrier(rho - sphere.radius, Some(rho), &(r / rho), grad, hess, mode)
             }
+            Candidate::TriangleSphere { obstacle, .. } => {
+                let sphere = mesh.sphere(obstacle);
+                let c = sphere.center;
+                match point_triangle_feature(&c, x[0], x[1], x[2]) {
+                    Feature::PointPlane(_) => {
+                        let d = point_plane_distance_derivatives(&c, x[0], x[1], x[2]);
+                        self.sphere_barrier::<12, 9>(&d, sphere.radius, grad, hess, mode)
+                    }
+                    // An edge or a vertex is closest: their own stencils count it.
+                    other => inactive_sphere_stencil(&other, &[&c, x[0], x[1], x[2]], sphere),
+                }
+            }
+            Candidate::EdgeSphere { obstacle, .. } => {
+                let sphere = mesh.sphere(obstacle);
+                let c = sphere.center;
+                match point_edge_feature(&c, x[0], x[1], [0, 1, 2]) {
+                    Feature::PointLine(_) => {
+                        let d = point_line_distance_derivatives(&c, x[0], x[1]);
+                        self.sphere_barrier::<9, 6>(&d, sphere.radius, grad, hess, mode)
+                    }
+                    other => inactive_sphere_stencil(&other, &[&c, x[0], x[1]], sphere),
+                }
+            }
         }
+    }
+
+    /// The barrier of a ball against a body feature, from the derivatives of the squared
+    /// distance `d` between the ball's centre (the first three of the `N` coordinates, fixed)
+    /// and the feature (the other `M = N - 3`): with the gap `s = sqrt(d) - r`,
+    /// `grad s = grad d / (2 sqrt d)`, `hess s = hess d / (2 sqrt d) - grad d grad d^T / (4 d^1.5)`,
+    /// gradient `2 kappa b'(s^2) s grad s` and Hessian
+    /// `kappa ((4 s^2 b'' + 2 b') grad s grad s^T + 2 s b' hess s)`.
+    fn sphere_barrier<const N: usize, const M: usize>(
+        &self,
+        d: &Derivatives<N>,
+        radius: f64,
+        grad: Option<&mut [f64]>,
+        hess: Option<&mut [f64]>,
+        mode: HessianMode,
+    ) -> f64 {
+        let root = d.value.sqrt();
+        let s = root - radius;
+        if s <= 0.0 {
+            return f64::INFINITY;
+        }
+        let dhat2 = self.dhat * self.dhat;
+        let gap2 = s * s;
+        if gap2 >= dhat2 {
+            return 0.0;
+        }
+        let k = self.stiffness;
+        let (db, d2b) = (barrier_gradient(gap2, dhat2), barrier_hessian(gap2, dhat2));
+        let g = d.gradient.fixed_rows::<M>(3).into_owned();
+        let grad_s = g / (2.0 * root);
+        if let Some(out) = grad {
+            let value = grad_s * (2.0 * k * db * s);
+            out[..M].copy_from_slice(value.as_slice());
+        }
+        if let Some(out) = hess {
+            let h = d.hessian.fixed_view::<M, M>(3, 3).into_owned();
+            let hess_s = h / (2.0 * root) - g * g.transpose() / (4.0 * root * d.value);
+            let mut value = grad_s * grad_s.transpose() * (k * (4.0 * gap2 * d2b + 2.0 * db))
+                + hess_s * (2.0 * k * s * db);
+            if mode == HessianMode::Projected {
+                project_to_psd(&mut value);
+            }
+            for i in 0..M {
+                for j in 0..M {
+                    out[i * M + j] = value[(i, j)];
+                }
+            }
+        }
+        k * barrier(gap2, dhat2)
     }
 
     /// The barrier of one feature distance, written into the stencil's outputs.
@@ -376,7 +448,8 @@ pub fn candidate_squared_distance(
 }
 
 /// The distance (m) of a stencil: unsigned between surface features, signed (negative when
-/// penetrating) for analytic obstacles.
+/// penetrating) for analytic obstacles (for a ball against a triangle or an edge: the distance
+/// from its centre to the nearest point of the feature, minus the radius).
 pub fn candidate_distance(mesh: &CollisionMesh, candidate: &Candidate, local: &[Vec3]) -> f64 {
     let x: Vec<&Vec3> = local.iter().collect();
     match *candidate {
@@ -390,6 +463,30 @@ pub fn candidate_distance(mesh: &CollisionMesh, candidate: &Candidate, local: &[
         }
         Candidate::PointPlane { obstacle, .. } => mesh.plane(obstacle).signed_distance(x[0]),
         Candidate::PointSphere { obstacle, .. } => mesh.sphere(obstacle).signed_distance(x[0]),
+        Candidate::TriangleSphere { obstacle, .. } => {
+            let sphere = mesh.sphere(obstacle);
+            let feature = point_triangle_feature(&sphere.center, x[0], x[1], x[2]);
+            feature_distance(&feature, &[&sphere.center, x[0], x[1], x[2]]).sqrt() - sphere.radius
+        }
+        Candidate::EdgeSphere { obstacle, .. } => {
+            let sphere = mesh.sphere(obstacle);
+            let feature = point_edge_feature(&sphere.center, x[0], x[1], [0, 1, 2]);
+            feature_distance(&feature, &[&sphere.center, x[0], x[1]]).sqrt() - sphere.radius
+        }
+    }
+}
+
+/// A ball stencil whose closest body feature belongs to another stencil: no energy of its own,
+/// `+inf` when the ball touches that feature.
+fn inactive_sphere_stencil(
+    feature: &Feature,
+    x: &[&Vec3],
+    sphere: &super::obstacle::Sphere,
+) -> f64 {
+    if feature_distance(feature, x).sqrt() - sphere.radius <= 0.0 {
+        f64::INFINITY
+    } else {
+        0.0
     }
 }
 

@@ -2,8 +2,10 @@
 //! through the same Newton solver as statics (docs/theory.md, "Dynamics", has the equations,
 //! the step methods and their measured accuracy).
 
-use super::system::{FactorReuse, StepTerms, System};
+use super::system::{ContactSolve, FactorReuse, FrictionLag, StepTerms, System};
 use super::{Loads, Model};
+use crate::contact::ccd::DEFAULT_MIN_SEPARATION;
+use crate::contact::ContactForces;
 use crate::error::{Error, Result};
 use crate::newton::{self, NewtonOptions};
 use crate::report::{SolveReport, Timings};
@@ -30,7 +32,8 @@ pub enum StepMethod {
     Modified,
     /// One iteration of [`StepMethod::Modified`] per step, converged or not (the linearised
     /// step of SOFA's implicit Euler, with a kept factorisation): fast and less accurate; each
-    /// step's remaining residual is reported.
+    /// step's remaining residual is reported. With contact, a step that ends within `dhat` of
+    /// an obstacle (or that the collision bound cuts short) is completed by modified Newton.
     LinearlyImplicit,
 }
 
@@ -106,10 +109,23 @@ pub struct Trajectory {
     /// The relative residual every step ended with (its last sub-step's): below the tolerance
     /// unless the method is [`StepMethod::LinearlyImplicit`].
     pub residuals: Vec<f64>,
-    /// Times a step was halved after a Newton failure.
+    /// Times a step was halved after a Newton failure (or an obstacle's motion).
     pub cutbacks: usize,
     /// Seconds per phase over all steps.
     pub timings: Timings,
+    /// With obstacles: the contact at every saved frame.
+    pub contact: Vec<ContactFrame>,
+    /// With obstacles: the minimum distance (m) between the body and its obstacles at every
+    /// accepted Newton iterate of every step (over the stencils within `dhat`, `+inf` when none).
+    pub iterate_min_distances: Vec<f64>,
+}
+
+/// The contact of one saved frame: its forces and where each obstacle is (its translation from
+/// its place at time 0, m).
+#[derive(Clone, Debug, Default)]
+pub struct ContactFrame {
+    pub forces: ContactForces,
+    pub translations: Vec<[f64; 3]>,
 }
 
 /// The state between two steps: every unknown (full DOFs), the velocity of the free ones, and
@@ -200,6 +216,13 @@ impl Model {
     /// from the last solve) at rest or with `initial_velocities` (3 n, m/s); a simulation that
     /// starts where the last one ended (its final positions and velocities) continues it
     /// exactly (see `Continuation`).
+    ///
+    /// Obstacles move along their paths; each step first moves them to where they are at its end
+    /// (split, like a failed step, when that would make them touch the body), lags friction at
+    /// the step's start (`eps_u = eps_v h`), starts Newton from its start cut short of any
+    /// contact, and balances the barrier stiffness there (IPC's initial stiffness). Every step
+    /// method bounds its line search by continuous collision detection; modified Newton
+    /// refactorises when the active contacts change.
     #[allow(clippy::too_many_arguments)]
     pub fn simulate_with(
         &mut self,
@@ -239,8 +262,43 @@ impl Model {
             // Halve the step on failure: a queue of sub-steps that must add up to dt.
             let mut pending = vec![(dt, 0usize)];
             let (mut iterations, mut factorizations, mut residual) = (0, 0, 0.0);
+            let mut sub_time = time;
             while let Some((h, depth)) = pending.pop() {
-                let outcome = self.time_step(setup, &mut state, h, &mut reuse);
+                // Obstacles move first, with the body where it is: a motion that would touch it
+                // splits the step.
+                if let Some(contact) = &mut self.terms.contact {
+                    let end = sub_time + h;
+                    if contact.obstacle_motion_bound(&state.z, end, DEFAULT_MIN_SEPARATION) < 1.0 {
+                        if depth < MAX_STEP_SPLITS {
+                            trajectory.cutbacks += 1;
+                            pending.push((h / 2.0, depth + 1));
+                            pending.push((h / 2.0, depth + 1));
+                            continue;
+                        }
+                        return Err(Error::invalid(
+                            "obstacles",
+                            "paths along which the obstacles do not run into the body faster than it can move away",
+                            format!(
+                                "time step {s} (t = {time:.4} s): an obstacle would touch the body even at dt = {h:.3e} s"
+                            ),
+                        ));
+                    }
+                    contact.set_time(end);
+                    let slip = contact.friction_velocity() * h;
+                    contact.lag_friction(&state.z, &state.z, slip);
+                }
+                let outcome = self.time_step(
+                    setup,
+                    &mut state,
+                    h,
+                    &mut reuse,
+                    &mut trajectory.iterate_min_distances,
+                );
+                if outcome.is_ok() {
+                    sub_time += h;
+                } else if let Some(contact) = &mut self.terms.contact {
+                    contact.set_time(sub_time);
+                }
                 let report = match &outcome {
                     Ok(report) => report,
                     Err(Error::NotConverged { report, .. }) => report,
@@ -376,6 +434,12 @@ impl Model {
             crate::error::check_finite("initial_velocities", v)?;
         }
         let z = self.start_state("initial_positions", initial_positions)?;
+        if let Some(contact) = &mut self.terms.contact {
+            contact.set_time(0.0);
+            contact.clear_friction();
+        }
+        self.check_apart("initial_positions", &z)?;
+        self.prepare_contact();
         if let (Some(x), Some(v), Some(last)) = (
             initial_positions,
             initial_velocities,
@@ -410,6 +474,14 @@ impl Model {
     ) {
         let n = self.mesh.n_nodes();
         let rest = self.mesh.rest_flat();
+        if let Some(contact) = &self.terms.contact {
+            trajectory.contact.push(ContactFrame {
+                forces: contact.forces(&state.z),
+                translations: (0..contact.n_obstacles())
+                    .map(|k| contact.translation_at(k, t).into())
+                    .collect(),
+            });
+        }
         trajectory.times.push(t);
         trajectory
             .positions
@@ -425,13 +497,16 @@ impl Model {
     }
 
     /// One implicit Euler step of length `h` from `state`, solved by the setup's method with
-    /// the factorisation `reuse` keeps; `state` moves to its end when it converges.
+    /// the factorisation `reuse` keeps; `state` moves to its end when it converges. With
+    /// obstacles (already where they are at the step's end, friction lagged) the minimum
+    /// distance at every accepted iterate goes to `iterate_min_distances`.
     pub(crate) fn time_step(
         &mut self,
         setup: &StepSetup,
         state: &mut StepState,
         h: f64,
         reuse: &mut FactorReuse,
+        iterate_min_distances: &mut Vec<f64>,
     ) -> Result<SolveReport> {
         let previous: Vec<f64> = setup.free.iter().map(|&d| state.z[d]).collect();
         let step = self.step_terms(setup, state, &previous, h);
@@ -445,6 +520,7 @@ impl Model {
         for (f, &d) in setup.free.iter().enumerate() {
             trial[d] = setup.start_value(f, &previous, &state.velocity, before, h);
         }
+        self.cut_short_of_contact(setup, &state.z, &mut trial);
         let mut problem = System::new(
             self,
             setup.full_load.clone(),
@@ -456,6 +532,9 @@ impl Model {
             reuse.last_norm = None;
             problem.reuse = Some(reuse.clone());
         }
+        if problem.model.terms.contact.is_some() {
+            problem.contact = Some(ContactSolve::new(FrictionLag::Fixed, true));
+        }
         // The step scales the internal energy, dashpots included, by 1 + beta_K / h; a dashpot
         // over h + beta_K keeps their force at c dL/dt.
         problem
@@ -465,7 +544,23 @@ impl Model {
             .begin_step(h + setup.damping.stiffness, &state.z);
         let outcome = rayon::scope(|_| match setup.method {
             StepMethod::LinearlyImplicit => {
-                newton::single_iteration(&mut problem, &mut trial, &setup.newton)
+                let once = newton::single_iteration(&mut problem, &mut trial, &setup.newton);
+                // One linearisation cannot balance a barrier (its force at the step's end can
+                // exceed the body's weight a billion-fold): a step that ends within dhat of an
+                // obstacle, or that the collision bound cut short, is completed by modified
+                // Newton.
+                let near = problem.contact.as_ref().is_some_and(|c| c.within_dhat());
+                match once {
+                    Ok(first)
+                        if !first.converged
+                            && problem.contact.is_some()
+                            && (near || first.step_lengths.first().is_some_and(|&t| t < 1.0)) =>
+                    {
+                        newton::solve(&mut problem, &mut trial, &setup.newton)
+                            .map(|rest| chain_reports(first, rest))
+                    }
+                    other => other,
+                }
             }
             _ => newton::solve(&mut problem, &mut trial, &setup.newton),
         });
@@ -473,7 +568,15 @@ impl Model {
         if let Some(kept) = problem.reuse.take() {
             *reuse = kept;
         }
+        let contact = problem.contact.take();
         drop(problem);
+        let mut outcome = outcome;
+        if let Some(solve) = contact {
+            iterate_min_distances.extend(solve.iterate_min_distances);
+            if let Ok(report) = &mut outcome {
+                report.timings.contact = solve.seconds;
+            }
+        }
         // A failed step, or a single iteration that reduced the residual too little, says the
         // kept factorisation no longer fits: the next step starts with a fresh one (a linearly
         // implicit step has no second iteration in which to notice).
@@ -506,6 +609,29 @@ impl Model {
             state.z = trial;
         }
         outcome
+    }
+
+    /// Moves the displacements of a step's start `trial` back toward the step's start `z` (full
+    /// DOFs) until they are clear of every contact on the way (continuous collision detection):
+    /// Newton must start apart.
+    fn cut_short_of_contact(&self, setup: &StepSetup, z: &[f64], trial: &mut [f64]) {
+        let Some(contact) = &self.terms.contact else {
+            return;
+        };
+        let n = self.mesh.n_nodes();
+        let mut dz = vec![0.0; 3 * n];
+        for &d in setup.free[..setup.n_displacement]
+            .iter()
+            .filter(|&&d| d < 3 * n)
+        {
+            dz[d] = trial[d] - z[d];
+        }
+        let reach = contact.max_step(z, &dz, DEFAULT_MIN_SEPARATION);
+        if reach < 1.0 {
+            for &d in &setup.free[..setup.n_displacement] {
+                trial[d] = z[d] + reach * (trial[d] - z[d]);
+            }
+        }
     }
 
     /// The inertia and damping of a step of length `h` from `state` (`previous`: its free
@@ -580,6 +706,22 @@ impl StepSetup {
     }
 }
 
+/// One report of a solve continued by another from where it ended.
+fn chain_reports(first: SolveReport, rest: SolveReport) -> SolveReport {
+    let mut report = rest;
+    report.iterations += first.iterations;
+    report.projected_steps += first.projected_steps;
+    add_timings(&mut report.timings, &first.timings);
+    for (all, head) in [
+        (&mut report.residual_history, first.residual_history),
+        (&mut report.energy_history, first.energy_history),
+        (&mut report.step_lengths, first.step_lengths),
+    ] {
+        all.splice(0..0, head);
+    }
+    report
+}
+
 /// Adds `b`'s seconds and counts to `a`'s.
 fn add_timings(a: &mut Timings, b: &Timings) {
     a.assembly += b.assembly;
@@ -590,4 +732,6 @@ fn add_timings(a: &mut Timings, b: &Timings) {
     a.total += b.total;
     a.factorizations += b.factorizations;
     a.failed_factorizations += b.failed_factorizations;
+    a.contact += b.contact;
+    a.step_bound += b.step_bound;
 }

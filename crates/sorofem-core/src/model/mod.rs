@@ -3,15 +3,18 @@
 //!
 //! The pieces: [`layout`] (where each unknown lives), [`terms`] (the registry of energy terms),
 //! `system` (the Newton view of a model), [`statics`] (equilibria), [`dynamics`] (implicit
-//! Euler); sensitivities are in [`crate::sensitivity`].
+//! Euler), `contact` (obstacles: setting them up, their forces); sensitivities are in
+//! [`crate::sensitivity`].
 
+mod contact;
 pub mod dynamics;
 pub mod layout;
 pub mod statics;
 mod system;
 pub(crate) mod terms;
 
-pub use dynamics::{Damping, DynamicsOptions, StepMethod, Trajectory};
+pub use contact::ContactReport;
+pub use dynamics::{ContactFrame, Damping, DynamicsOptions, StepMethod, Trajectory};
 pub use layout::DofLayout;
 pub use statics::{Loads, Solution};
 

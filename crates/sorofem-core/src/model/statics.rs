@@ -1,6 +1,7 @@
 //! Static equilibria: loads in, positions, pressures, reactions and cable states out.
 
-use super::system::System;
+use super::contact::ContactReport;
+use super::system::{ContactSolve, FrictionLag, System};
 use super::Model;
 use crate::energy::HessianMode;
 use crate::error::{check_finite, Error, Result};
@@ -18,9 +19,15 @@ pub struct Loads {
     pub prescribed: Vec<[f64; 3]>,
 }
 
+/// Times a static solve with friction lags it again at its equilibrium and solves once more (each
+/// new solve starting there), until a solve needs no iteration: quasi-static friction whose
+/// normal forces and directions are those of the equilibrium, not of the load step's start.
+const MAX_FRICTION_LAGS: usize = 4;
+
 /// An equilibrium: positions (m, 3 n node-major), nodal pressures (Pa, mixed only), the
 /// reaction force (N) at each fixed node (in the order they were given), the position (m) of
-/// every cable point and the tension (N) of every cable segment, and the report.
+/// every cable point and the tension (N) of every cable segment, the contact (with obstacles)
+/// and the report.
 #[derive(Clone, Debug)]
 pub struct Solution {
     pub positions: Vec<f64>,
@@ -28,6 +35,7 @@ pub struct Solution {
     pub reactions: Vec<[f64; 3]>,
     pub cable_points: Vec<Vec<[f64; 3]>>,
     pub cable_tensions: Vec<Vec<f64>>,
+    pub contact: Option<ContactReport>,
     pub report: SolveReport,
 }
 
@@ -35,6 +43,10 @@ impl Model {
     /// Static equilibrium under `loads`, starting from `initial` positions (3 n, m) or the rest shape.
     /// Internally the unknowns are displacements from the rest shape. In the mixed formulation a
     /// warm start (`initial` given) also starts from the pressures of the previous solve.
+    ///
+    /// With obstacles (held where their paths start), every accepted iterate is apart from
+    /// them, and friction is lagged at each load step's start, then again at the equilibrium
+    /// (slip measured from the load step's start), up to four times.
     pub fn solve(
         &mut self,
         loads: &Loads,
@@ -45,20 +57,71 @@ impl Model {
         self.check_loads(loads)?;
         let n = self.mesh.n_nodes();
         let mut z = self.start_state("initial", initial)?;
+        if let Some(contact) = &mut self.terms.contact {
+            contact.set_time(0.0);
+            contact.clear_friction();
+        }
+        if initial.is_some() {
+            self.check_apart("initial", &z)?;
+        }
+        self.prepare_contact();
         let full_load = self.load_vector(loads);
         let prescribed = self.prescribed(loads);
         let mut problem = System::new(self, full_load, prescribed, None, options);
+        if problem.model.terms.contact.is_some() {
+            let lag = FrictionLag::LoadStep { origin: None };
+            problem.contact = Some(ContactSolve::new(lag, false));
+        }
         // Only the prescribed displacements are scaled by the load factor: the initial guess is
         // kept as given for the free DOFs, which is what warm starts need.
         // The Newton loop runs on a worker of the thread pool: from the calling thread, its
         // single-threaded factorisations let the workers fall asleep and the element passes
         // after them ran slower (docs/theory.md, "Newton's method").
-        let report = rayon::scope(|_| newton::solve(&mut problem, &mut z, options))?;
+        let mut report = rayon::scope(|_| newton::solve(&mut problem, &mut z, options))?;
+        if problem
+            .model
+            .terms
+            .contact
+            .as_ref()
+            .is_some_and(|c| c.has_friction())
+        {
+            let solve = problem.contact.as_mut().expect("contact");
+            let origin = solve.load_step_start.clone();
+            solve.friction = FrictionLag::LoadStep {
+                origin: Some(origin),
+            };
+            let again_options = NewtonOptions {
+                load_steps: 1,
+                ..options.clone()
+            };
+            for _ in 0..MAX_FRICTION_LAGS {
+                let again = rayon::scope(|_| newton::solve(&mut problem, &mut z, &again_options))?;
+                let done = again.iterations == 0;
+                absorb(&mut report, again);
+                if done {
+                    break;
+                }
+            }
+        }
         let full_load = std::mem::take(&mut problem.full_load);
+        let contact_solve = problem.contact.take();
         drop(problem);
-        // Reaction = internal force minus applied load at the supports, so that the reactions
-        // balance the loads: sum(reactions) + sum(loads) = 0 at equilibrium.
-        let internal = self.assembler.full_gradient(&self.terms.internal(), &z);
+        let iterate_min_distances = match contact_solve {
+            Some(solve) => {
+                report.timings.contact = solve.seconds;
+                solve.iterate_min_distances
+            }
+            None => Vec::new(),
+        };
+        // Reaction = internal force (contact included) minus applied load at the supports, so
+        // that the reactions balance the loads and the contact forces: sum(reactions) +
+        // sum(loads) + sum(contact forces) = 0 at equilibrium (with cable anchors' forces).
+        let mut internal = self.assembler.full_gradient(&self.terms.internal(), &z);
+        if let Some(contact) = &self.terms.contact {
+            for (i, g) in contact.full_gradient(&z).into_iter().enumerate() {
+                internal[i] += g;
+            }
+        }
         let reactions = self
             .fixed_nodes
             .iter()
@@ -73,6 +136,7 @@ impl Model {
         self.last_extra = Some(z[self.layout.extra()].to_vec());
         let cable_points = self.terms.cables.points_at(&z);
         let cable_tensions = self.terms.cables.tensions_at(&z);
+        let contact = self.contact_report(&z, iterate_min_distances);
         z.truncate(3 * n);
         for (zi, ri) in z.iter_mut().zip(self.mesh.rest_flat()) {
             *zi += ri;
@@ -83,6 +147,7 @@ impl Model {
             reactions,
             cable_points,
             cable_tensions,
+            contact,
             report,
         })
     }
@@ -212,4 +277,26 @@ impl Model {
                 .collect()
         })
     }
+}
+
+/// Appends the record of a further solve from where `report`'s ended (a friction lag).
+fn absorb(report: &mut SolveReport, more: SolveReport) {
+    report.iterations += more.iterations;
+    report.residual_history.extend(more.residual_history);
+    report.energy_history.extend(more.energy_history);
+    report.step_lengths.extend(more.step_lengths);
+    report.projected_steps += more.projected_steps;
+    report.residual_norm = more.residual_norm;
+    report.reference_norm = more.reference_norm;
+    let (t, m) = (&mut report.timings, more.timings);
+    t.assembly += m.assembly;
+    t.factorization += m.factorization;
+    t.failed_factorization += m.failed_factorization;
+    t.solve += m.solve;
+    t.line_search += m.line_search;
+    t.step_bound += m.step_bound;
+    t.total += m.total;
+    t.factorizations += m.factorizations;
+    t.failed_factorizations += m.failed_factorizations;
+    report.message = format!("converged in {} Newton iterations", report.iterations);
 }

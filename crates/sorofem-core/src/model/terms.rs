@@ -7,6 +7,7 @@ use super::layout::DofLayout;
 use super::statics::Loads;
 use super::Formulation;
 use crate::cables::{CableSpec, EmbeddedCables, PointPlacement};
+use crate::contact::ContactTerm;
 use crate::energy::{
     CableTerm, ElasticTerm, Formulation as ElementFormulation, GravityTerm, LumpedMass,
     NodalForceTerm, ParamTerm, PointGravityTerm, Term,
@@ -24,10 +25,18 @@ pub struct TermSpecs {
 }
 
 /// Every energy term of a model, and the lumped mass that gravity and inertia act on.
+///
+/// Contact is a term whose stencils change with the positions, so the assembler's fixed element
+/// plans cannot hold it: the Newton system (`system.rs`) adds it after the assembler's pass,
+/// into the same gradient and Hessian values (see [`ContactTerm::add_to`]), and reactions and
+/// sensitivities add it where they add the internal terms. Its parameters (`dhat`, the barrier
+/// stiffness) are not among the sensitivities' parameters.
 pub(crate) struct Terms {
     pub elastic: ElasticTerm,
     pub cables: CableTerm,
     pub mass: LumpedMass,
+    /// Contact with obstacles (and the body itself), set by `Model::set_contact`.
+    pub contact: Option<ContactTerm>,
     /// Where each cable point was placed.
     pub placements: Vec<Vec<PointPlacement>>,
 }
@@ -76,6 +85,7 @@ impl Terms {
                     .map(|(i, &(_, mass))| (layout.free_node(i), mass))
                     .collect(),
             },
+            contact: None,
             placements: embedded.placements,
         })
     }
