@@ -34,7 +34,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("fitting",),
     ("cables", "obstacles"),
     ("body",),
-    ("static",),
+    ("static", "_pvd"),
     ("dynamics",),
     ("plot", "targets"),
     ("inverse._parameters", "inverse.results"),
