@@ -75,6 +75,15 @@ def targets(rows: dict[str, Row], array_dir: Path) -> str:
             add("peak memory, ~100k tets, mixed", name,
                 r.get("peak_rss_mib") and r["peak_rss_mib"] / 1024, 12.0, " GiB")
 
+    # Issue 15: a Yeoh hammerbot costs at most 1.3x the Neo-Hookean one, Newton iterations within 2.
+    for yeoh, neo in [("sorofem/hammerbot-yeoh", std_bot), (f"sorofem/hammerbot-yeoh-mixed-nu{MIXED_NU:g}", mixed_bot)]:
+        if yeoh in rows:
+            y, n = ok_row(yeoh), ok_row(neo)
+            add("Yeoh hammerbot solve time / Neo-Hookean", f"{yeoh} vs {neo}",
+                y and n and ratio(y["seconds"], n["seconds"]), 1.3, "x")
+            add("Yeoh hammerbot Newton iterations - Neo-Hookean", f"{yeoh} vs {neo}",
+                y and n and abs(y["iterations"] - n["iterations"]), 2)
+
     # Cables.
     r = rows.get("sorofem/hammerbot-2-cables")
     if r is not None:

@@ -88,8 +88,14 @@ def test_generic_material_setter_matches_the_original_one():
         model.set_material_model("neo_hookean", {"mu": np.full(m, -1.0), "lambda": np.full(m, 1e5)}, np.ones(m))
     assert info.value.parameter == "mu" and "at tet 0" in str(info.value)
     with pytest.raises(sf.ParameterError) as info:
-        model.set_material_model("yeoh", {}, np.ones(m))
+        model.set_material_model("arruda_boyce", {}, np.ones(m))
     assert info.value.parameter == "model"
+    with pytest.raises(sf.ParameterError) as info:
+        model.set_material_model("yeoh", {}, np.ones(m))
+    assert info.value.parameter == "params" and "c10" in str(info.value)
+    with pytest.raises(sf.ParameterError) as info:
+        model.set_material_model("ogden", {}, np.ones(m))
+    assert info.value.parameter == "terms"
 
 
 @pytest.mark.parametrize("formulation", ["standard", "mixed"])

@@ -18,7 +18,7 @@ TABLES["robot"] = Table(
     "(checked against hammerbot.xml), rho = 1070 kg/m^3, gravity (0, -9.8, 0) in the file's own axes, one "
     "load step, tolerance 1e-8. `sorofem/hammerbot` is the issue-2 case (standard, E = 100 kPa, nu = 0.4); "
     "the nu = 0.4999 pair (E = 90 kPa) is the same solve with the mixed (u-p) formulation and with the "
-    "standard one, both allowed 200 Newton iterations. Time = wall time of `Body(...)`, `fix` and "
+    "standard one, both allowed 200 Newton iterations. The `-yeoh` rows: a Yeoh silicone with the same small-strain moduli (2 c10 = mu, 2/d1 = K, c20 = -mu/50, c30 = mu/500; E and nu shown are those). Time = wall time of `Body(...)`, `fix` and "
     "`solve_static` (model build included), median of the repeats. Unknowns = free displacement DOFs "
     "(+ one pressure per node for mixed). Tip = the nodes of the x = +5 cm face.",
     (
@@ -42,14 +42,26 @@ TABLES["robot"] = Table(
 )
 
 
+def hammerbot_material(model: str, youngs_modulus: float, poisson_ratio: float) -> Any:
+    """Neo-Hookean, or a Yeoh silicone with the same small-strain moduli (2 c10 = mu, 2/d1 = K)
+    softening then stiffening at large strain (c20 = -mu/50, c30 = mu/500)."""
+    import sorofem as sf
+
+    if model == "neo-hookean":
+        return sf.NeoHookean(youngs_modulus=youngs_modulus, poisson_ratio=poisson_ratio, density=1070.0)
+    mu = youngs_modulus / (2 * (1 + poisson_ratio))
+    bulk = youngs_modulus / (3 * (1 - 2 * poisson_ratio))
+    return sf.Yeoh(c10=mu / 2, c20=-mu / 50, c30=mu / 500, d1=2 / bulk, density=1070.0)
+
+
 def hammerbot_static(
     formulation: str = "standard", youngs_modulus: float = 100e3, poisson_ratio: float = 0.4,
-    max_iterations: int = 50,
+    max_iterations: int = 50, model: str = "neo-hookean",
 ) -> Row:
     import sorofem as sf
 
     mesh, fixed = hammerbot_mesh()
-    material = sf.NeoHookean(youngs_modulus=youngs_modulus, poisson_ratio=poisson_ratio, density=1070.0)
+    material = hammerbot_material(model, youngs_modulus, poisson_ratio)
 
     def run() -> Any:
         body = sf.Body(mesh, material, formulation=formulation)
@@ -79,4 +91,8 @@ case(f"sorofem/hammerbot-mixed-nu{MIXED_NU:g}", "robot", quick=True)(
 )
 case(f"sorofem/hammerbot-standard-nu{MIXED_NU:g}", "robot", quick=True)(
     partial(hammerbot_static, "standard", 90e3, MIXED_NU, 200)
+)
+case("sorofem/hammerbot-yeoh", "robot", quick=True)(partial(hammerbot_static, model="yeoh"))
+case(f"sorofem/hammerbot-yeoh-mixed-nu{MIXED_NU:g}", "robot", quick=True)(
+    partial(hammerbot_static, "mixed", 90e3, MIXED_NU, 200, "yeoh")
 )

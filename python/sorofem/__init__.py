@@ -13,7 +13,9 @@ Examples
 
 from importlib import import_module
 
-from . import cables, dynamics, errors, inverse, io, materials, meshing, obstacles, plot, progress, solver, targets
+from . import (
+    cables, dynamics, errors, fitting, inverse, io, materials, meshing, obstacles, plot, progress, solver, targets,
+)
 from ._deprecated import moved as _moved
 from ._version import __version__
 from .body import Body
@@ -31,8 +33,9 @@ from .errors import (
     SolverError,
     SorofemError,
 )
+from .fitting import MaterialFit, fit_material
 from .inverse import control, estimate, gradient
-from .materials import NeoHookean
+from .materials import MooneyRivlin, NeoHookean, Ogden, Yeoh
 from .mesh import Mesh
 from .meshing import tetrahedralize  # the mesher itself (optional extra) is imported on first use
 from .obstacles import Box, Obstacle, Plane, Sphere
@@ -56,6 +59,11 @@ __all__ = [
     "__version__",
     "Mesh",
     "NeoHookean",
+    "MooneyRivlin",
+    "Yeoh",
+    "Ogden",
+    "fit_material",
+    "MaterialFit",
     "Body",
     "solve_static",
     "StaticResult",

@@ -275,10 +275,11 @@ class Model:
         density: _F,
         options: dict[str, Any] | None = None,
     ) -> None:
-        """Any material model by name ("neo_hookean"), its parameters by name (each (m,), every
-        name of material_param_names(model) exactly once), density (m,) kg/m^3 and options
-        ("neo_hookean": "volumetric" "log" | "linear", default the constructor's). Raises
-        ParameterError naming the parameter (and the tet) that is out of range."""
+        """Any material model by name ("neo_hookean", "mooney_rivlin", "yeoh", "ogden"), its
+        parameters by name (each (m,), every name of material_param_names(model) exactly once),
+        density (m,) kg/m^3 and options ("neo_hookean": "volumetric" "log" | "linear", default
+        the constructor's; "ogden": "terms" 1 to 3). Raises ParameterError naming the parameter
+        (and the tet) that is out of range."""
     @property
     def material_model(self) -> str:
         """The material model's name."""

@@ -87,14 +87,17 @@ class Body:
     mesh
         The rest configuration.
     material
-        A :class:`~sorofem.NeoHookean` (scalar or per-element parameters).
+        A :class:`~sorofem.NeoHookean`, :class:`~sorofem.MooneyRivlin`, :class:`~sorofem.Yeoh`
+        or :class:`~sorofem.Ogden` (scalar or per-element parameters).
     formulation
         ``"standard"``: displacement-only linear tetrahedra; they lock (come out far too
         stiff) as nu -> 0.5. ``"mixed"``: linear displacement plus a continuous linear nodal
         pressure ``p`` (Pa), a perturbed-Lagrangian saddle point that does not lock; the
         volumetric energy ``lambda/2 c(J)^2`` becomes ``p c(J) - p^2 / (2 lambda)``, so
-        ``p ~ lambda c(J)`` is positive in tension. See :data:`FORMULATIONS`.
+        ``p ~ lambda c(J)`` is positive in tension (the decoupled models: most of
+        ``(J - 1)^2 / d1``, see :mod:`sorofem.materials.decoupled`). See :data:`FORMULATIONS`.
     volumetric
+        Neo-Hookean only (the decoupled models' volumetric term is in ``J - 1`` by definition):
         ``"log"`` (default): ``c(J) = ln J``; ``"linear"``: ``c(J) = J - 1``, which makes the
         nearly incompressible limit preserve volume (rather than mean ``ln J``) exactly.
         Used by both formulations.
@@ -225,7 +228,9 @@ class Body:
 
     def _checked_material(self, material: Material, formulation: str) -> Material:
         if not isinstance(material, Material):
-            raise InputError(f"material: expected a sorofem.NeoHookean, got {describe(material)}")
+            raise InputError(
+                f"material: expected a sorofem material (NeoHookean, MooneyRivlin, Yeoh, Ogden), got {describe(material)}"
+            )
         # Fail now rather than at solve time if per-element arrays do not fit the mesh.
         material.per_element(self._mesh.n_tets)
         material.check_formulation(formulation, self._mesh.n_tets)
@@ -583,7 +588,7 @@ class Body:
         solves.
         """
         model = self._built_model()
-        model.set_material(*self._material.per_element(self._mesh.n_tets))
+        model.set_material_model(*self._material.core_material(self._mesh.n_tets))
         contact = (tuple(id(o) for o in self._obstacles), tuple(self._contact.items()))
         if self._model_contact[0] != contact:
             model.set_contact([o.to_core() for o in self._obstacles], **self._contact)

@@ -412,16 +412,32 @@ pub fn string_option(
 }
 
 /// A material model by name, with its options: "neo_hookean" takes "volumetric" ("log" |
-/// "linear"; default `volumetric`, the model's constructor option). Unknown option keys are
-/// errors.
+/// "linear"; default `volumetric`, the model's constructor option), "ogden" takes "terms" (1 to
+/// 3, required); "mooney_rivlin" and "yeoh" take none. Unknown option keys are errors.
 pub fn material_model(
     name: &str,
     options: Option<&Bound<'_, PyDict>>,
     volumetric_default: Volumetric,
 ) -> Result<MaterialModel, Error> {
-    let known: &[&str] = match name {
-        "neo_hookean" => &["volumetric"],
-        _ => &[],
+    let model = choice(
+        "model",
+        name,
+        &[
+            (
+                "neo_hookean",
+                MaterialModel::NeoHookean {
+                    volumetric: volumetric_default,
+                },
+            ),
+            ("mooney_rivlin", MaterialModel::MooneyRivlin),
+            ("yeoh", MaterialModel::Yeoh),
+            ("ogden", MaterialModel::Ogden { terms: 0 }),
+        ],
+    )?;
+    let known: &[&str] = match model {
+        MaterialModel::NeoHookean { .. } => &["volumetric"],
+        MaterialModel::Ogden { .. } => &["terms"],
+        MaterialModel::MooneyRivlin | MaterialModel::Yeoh => &[],
     };
     if let Some(options) = options {
         for key in options.keys() {
@@ -435,16 +451,6 @@ pub fn material_model(
             }
         }
     }
-    let model = choice(
-        "model",
-        name,
-        &[(
-            "neo_hookean",
-            MaterialModel::NeoHookean {
-                volumetric: volumetric_default,
-            },
-        )],
-    )?;
     Ok(match model {
         MaterialModel::NeoHookean { .. } => MaterialModel::NeoHookean {
             volumetric: match string_option(options, "volumetric")? {
@@ -452,6 +458,17 @@ pub fn material_model(
                 None => volumetric_default,
             },
         },
+        MaterialModel::Ogden { .. } => {
+            let expected = "1, 2 or 3 Ogden terms";
+            let terms = options
+                .and_then(|o| o.get_item("terms").ok().flatten())
+                .ok_or_else(|| Error::invalid("terms", expected, "none"))?;
+            let count: usize = terms
+                .extract()
+                .map_err(|_| Error::invalid("terms", expected, describe(&terms)))?;
+            MaterialModel::ogden(count)?
+        }
+        other => other,
     })
 }
 

@@ -13,7 +13,8 @@ use errors::IntoPyResult;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-/// The parameter names of a material model ("neo_hookean"), in storage order.
+/// The parameter names of a material model ("neo_hookean", "mooney_rivlin", "yeoh", "ogden" with
+/// options {"terms": n}), in storage order.
 #[pyfunction]
 #[pyo3(signature = (model, options = None))]
 fn material_param_names(

@@ -147,9 +147,10 @@ impl Model {
         guarded(py, || inner.set_material(&material))
     }
 
-    /// Sets the material model by name ("neo_hookean"), its parameters as a dict of per-tet
-    /// arrays by name (see `material_param_names`), the density (m,) kg/m^3, and the model's
-    /// options ("neo_hookean": "volumetric", default the constructor's).
+    /// Sets the material model by name ("neo_hookean", "mooney_rivlin", "yeoh", "ogden"), its
+    /// parameters as a dict of per-tet arrays by name (see `material_param_names`), the density
+    /// (m,) kg/m^3, and the model's options ("neo_hookean": "volumetric", default the
+    /// constructor's; "ogden": "terms", 1 to 3).
     #[pyo3(signature = (model, params, density, options = None))]
     fn set_material_model(
         &mut self,
@@ -160,17 +161,14 @@ impl Model {
         options: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<()> {
         let m = self.inner.mesh().n_tets();
-        let default = match self.inner.material_model() {
-            sorofem_core::material::MaterialModel::NeoHookean { volumetric } => volumetric,
-        };
-        let model = convert::material_model(model, options, default).py(py)?;
+        let model = convert::material_model(model, options, self.inner.volumetric()).py(py)?;
         let params = convert::material_params(params, m).py(py)?;
         let density = convert::vector("density", density, Some(m)).py(py)?;
         let inner = &mut self.inner;
         guarded(py, || inner.set_material_model(model, &params, &density))
     }
 
-    /// The material model's name ("neo_hookean").
+    /// The material model's name ("neo_hookean", "mooney_rivlin", "yeoh", "ogden").
     #[getter]
     fn material_model(&self) -> &'static str {
         self.inner.material_model().name()

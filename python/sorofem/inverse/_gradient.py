@@ -14,7 +14,7 @@ from ..errors import InputError
 from ..solver import SolveOptions
 from ..static import solve_static
 from ..targets import BoundTarget, Target
-from ._parameters import Parameters
+from ._parameters import Parameters, core_sensitivities
 from ._problem import DEFAULT_TOLERANCE, bind
 from .results import GradientResult
 
@@ -98,6 +98,6 @@ def gradient(
         raise InputError(f"objective: expected a Target or a callable, got {type(objective).__name__}")
     # solve_static just left the model at this equilibrium with the body's own parameters.
     model = body.core_model()
-    core = {k: np.asarray(v) for k, v in model.adjoint(np.ascontiguousarray(dx)).items()}
+    core = core_sensitivities(model.adjoint(np.ascontiguousarray(dx)))
     grad = p.pullback(core, theta)
     return GradientResult(float(value), p.as_dict(grad), core, result)

@@ -21,7 +21,7 @@ from .._validate import describe
 from ..errors import InputError, ParameterError
 from ..materials import IDENTITY, LOG, NEO_HOOKEAN, Form, MaterialModel, Transform
 
-__all__ = ["PARAMETERS", "COMMAND_PARAMETERS", "parameter_names", "Parameters", "Block", "State"]
+__all__ = ["PARAMETERS", "COMMAND_PARAMETERS", "parameter_names", "core_sensitivities", "Parameters", "Block", "State"]
 
 #: Parameters that are not the material's: gravity (``(3,)``, m/s^2, :func:`sorofem.gradient`
 #: only), per spring cable its actuation alpha and segment stiffness (N/m), and per tendon its
@@ -80,9 +80,19 @@ class State:
     actuation: NDArray[np.float64]
     stiffness: NDArray[np.float64]
 
-    def core(self, model: MaterialModel) -> list[NDArray[np.float64]]:
-        """The arguments of the extension's ``Model.set_material``."""
-        return [self.material[name] for name in (*model.core_form.names, "density")]
+    def core(self, model: MaterialModel) -> tuple[str, dict[str, NDArray[np.float64]], NDArray[np.float64], dict[str, Any] | None]:
+        """The arguments of the extension's ``Model.set_material_model``."""
+        params = {model.parameter(name).core_key: self.material[name] for name in model.core_form.names}
+        return model.core_name, params, self.material["density"], dict(model.core_options) or None
+
+
+def core_sensitivities(adjoint: Mapping[str, Any]) -> dict[str, NDArray[np.float64]]:
+    """The extension's sensitivities (``Model.adjoint``) as one flat dict by key: the
+    ``"material"`` entry's parameters (core names: ``"mu"``, ``"c10"``, ``"mu:0"``) beside the
+    other blocks (``"density"``, ``"gravity"``, ...) and the original aliases (``"lam"``, ``"rho"``)."""
+    out = {k: np.asarray(v, dtype=np.float64) for k, v in adjoint.items() if k != "material"}
+    out.update({k: np.asarray(v, dtype=np.float64) for k, v in adjoint.get("material", {}).items()})
+    return out
 
 
 class Parameters:
@@ -131,7 +141,8 @@ class Parameters:
         for name in names:
             if not isinstance(name, str):
                 raise InputError(f"params: expected parameter names (str), got {name!r}")
-            kind, _, region = name.partition(":")
+            # Names may hold a ':' themselves (Ogden's "mu:0"): the region follows the last one.
+            kind, region = (name, "") if name in known else name.rpartition(":")[::2]
             if kind not in known:
                 raise InputError(f"params: unknown parameter {name!r}; expected one of {list(known)} (material ones optionally ':region')")
             elements = np.arange(m, dtype=np.int64)
@@ -297,19 +308,21 @@ class Parameters:
         return out
 
     def pullback(self, adjoint: Mapping[str, Any], theta: NDArray[np.float64]) -> NDArray[np.float64]:
-        """dO/dtheta from the extension's dO/d(core parameters)."""
+        """dO/dtheta from the extension's dO/d(core parameters) (``Model.adjoint``'s dict, or
+        :func:`core_sensitivities` of it)."""
+        adjoint = core_sensitivities(adjoint)
         st = self.state(theta)
         grad = np.zeros(self.size)
         for b in self.blocks:
             if b.is_field:
                 key = self.model.parameter(b.kind.removesuffix(_FIELD)).core_key
-                grad[b.slice] = np.asarray(adjoint[key])[b.elements]
+                grad[b.slice] = adjoint[key][b.elements]
             elif b.kind == _GRAVITY:
-                grad[b.slice] = np.asarray(adjoint["gravity"])
+                grad[b.slice] = adjoint["gravity"]
             elif b.kind in _CABLES:
-                grad[b.slice] = np.asarray(adjoint[b.kind])[b.cables]
+                grad[b.slice] = adjoint[b.kind][b.cables]
             else:
-                grad[b.offset] = sum(float(np.dot(np.asarray(adjoint[k]), d)) for k, d in self._partials(b, st).items())
+                grad[b.offset] = sum(float(np.dot(adjoint[k], d)) for k, d in self._partials(b, st).items())
         return grad
 
     def directions(self, theta: NDArray[np.float64]) -> list[dict[str, Any]]:

@@ -113,7 +113,7 @@ class Problem:
 
     def _solve(self, sc: Scenario, st: State) -> NDArray[np.float64]:
         model = self.model
-        model.set_material(*st.core(self.params.model))
+        model.set_material_model(*st.core(self.params.model))
         alpha = st.actuation.copy()
         if sc.actuation is not None:
             untouched = np.ones(len(alpha), dtype=bool)
@@ -236,9 +236,8 @@ def fitted_material(body: Any, st: State) -> Material:
     def compact(a: NDArray[np.float64]) -> Any:
         return float(a[0]) if np.all(a == a[0]) else a
 
-    model = body.material.model
-    values = {name: compact(st.material[name]) for name in model.core_form.names}
-    return type(body.material)(**values, density=compact(st.material["density"]))
+    values = {name: compact(st.material[name]) for name in body.material.model.core_form.names}
+    return body.material.with_values(values, compact(st.material["density"]))
 
 
 def final_results(body: Any, material: Material, st: State, scs: list[Scenario], p: Parameters) -> list[StaticResult]:

@@ -34,7 +34,9 @@ class GradientResult:
         name -> dO/dtheta (float for scalar parameters, arrays for fields, gravity, cables),
         in units of O per unit of the parameter.
     core
-        The extension's raw adjoint: dO/d(mu, lam, rho per element, gravity, cable values).
+        The extension's raw adjoint by key: dO/d(each material parameter per element under its
+        core name, "mu", "lambda" or "c10", "mu:0", ...; "density"; "gravity"; the cable
+        values), with the aliases "lam" and "rho".
     result
         The :class:`~sorofem.StaticResult` the gradient was taken at.
     """

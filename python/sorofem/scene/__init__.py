@@ -16,7 +16,10 @@ Schema
                                # of x, y, z; ["x", "-z", "y"] turns a y-up mesh into a z-up one
 
     [material]                 # required: The material: compressible Neo-Hookean, exactly one of youngs_modulus +
-                               # poisson_ratio or shear_modulus + lame_lambda.
+                               # poisson_ratio or shear_modulus + lame_lambda; decoupled Mooney-Rivlin, exactly
+                               # one of c10 + c01 + d1; decoupled Yeoh, exactly one of c10 + c20 + c30 + d1 + d2 +
+                               # d3; decoupled Ogden, exactly one of mu:0 + alpha:0 + mu:1 + alpha:1 + mu:2 +
+                               # alpha:2 + d1.
     model = "neo-hookean"      # the material model (sorofem.materials.MODELS)
     youngs_modulus = 66e3      # Young's modulus E (with poisson_ratio), Pa
     poisson_ratio = 0.45       # Poisson's ratio nu (with youngs_modulus)

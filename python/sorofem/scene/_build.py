@@ -97,9 +97,23 @@ def _span(mesh: Mesh) -> str:
     return f"the mesh spans {np.round(lo, 6).tolist()} .. {np.round(hi, 6).tolist()}"
 
 
+def _keyword_arguments(values: dict[str, Any]) -> dict[str, Any]:
+    """Material values by parameter name as the class's keywords: Ogden's ``"mu:0"``,
+    ``"mu:1"`` -> ``mu=[...]`` in term order."""
+    out: dict[str, Any] = {}
+    terms: dict[str, dict[int, Any]] = {}
+    for name, value in values.items():
+        base, vector, index = name.partition(":")
+        if vector:
+            terms.setdefault(base, {})[int(index)] = value
+        else:
+            out[name] = value
+    return out | {base: [by_index[i] for i in sorted(by_index)] for base, by_index in terms.items()}
+
+
 def _new_material(check: Checker, cls: type[Material], values: dict[str, Any], key: str) -> Material:
     try:
-        return cls(**values)
+        return cls(**_keyword_arguments(values))
     except ParameterError as exc:
         name = exc.parameter if exc.parameter in values else next(iter(values), "youngs_modulus")
         raise check.error(f"{key}.{name}", str(exc).removeprefix(f"{name}: ")) from None
@@ -139,7 +153,7 @@ def build_material(
                 )
             names[entry["name"]] = i
         # Values not given are the base material's, in the form the entry uses.
-        form = next((f for f in cls.model.forms if set(given) & set(f.names)), base.form)
+        form = next((f for f in base.model.forms if set(given) & set(f.names)), base.form)
         values = {**{n: base.value(n) for n in form.names}, "density": base.density, **given}
         materials.append(_new_material(check, cls, values, prefix))
         if "cells" in entry:
@@ -176,9 +190,9 @@ def build_material(
             raise check.error(key, str(exc).removeprefix(f"{exc.parameter}: ")) from None
     # One form for every entry: theirs if they agree, else the core's.
     forms = {mat.form.names for mat in every}
-    names_out = forms.pop() if len(forms) == 1 else cls.model.core_form.names
+    names_out = forms.pop() if len(forms) == 1 else base.model.core_form.names
     arrays = {a: np.array([mat.value(a) for mat in every])[owner + 1] for a in (*names_out, "density")}
-    material = cls(**arrays)
+    material = cls(**_keyword_arguments(arrays))
     regions = {name: np.flatnonzero(owner == i).astype(np.int64) for name, i in names.items()}
     return material, regions, owner
 

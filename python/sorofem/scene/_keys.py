@@ -95,8 +95,19 @@ def _material_values(live: dict[str, Any], commented: dict[str, Any] | None = No
     return out
 
 
+def _optional(model: MaterialModel, name: str) -> bool:
+    """A key a table may leave out: a parameter with a default (Yeoh's d2, d3: no such term) or
+    an Ogden term after the first (a model of fewer terms)."""
+    base, vector, index = name.partition(":")
+    return model.parameter(name).default is not None or (bool(vector) and index != "0")
+
+
 #: Every way to give a material, over all models: exactly one per table.
-_MATERIAL_FORMS = tuple(Group(form.names) for model in MODELS.values() for form in model.forms[::-1])
+_MATERIAL_FORMS = tuple(
+    Group(tuple(n for n in form.names if not _optional(model, n)), tuple(n for n in form.names if _optional(model, n)))
+    for model in MODELS.values()
+    for form in model.forms[::-1]
+)
 #: The material values a table may hold (every model's parameters, and density).
 MATERIAL_KEYS = tuple(_material_values({})) + (DENSITY.name,)
 

@@ -359,7 +359,8 @@ class Group:
 class Choice:
     """Exactly one (``required``) or at most one of several groups of keys.
 
-    A group is chosen by giving any key that belongs to it alone; then all its keys are
+    A group is chosen by giving any key that belongs to it alone (with ``partial``, failing that,
+    any extra that belongs to it alone); then all its keys are
     required (unless ``partial``: any of them), and keys of the other groups are not allowed.
     """
 
@@ -376,9 +377,11 @@ class Choice:
     def check(self, c: "Checker", table: dict[str, Any], key: str) -> None:
         counts: dict[str, int] = {}
         for g in self.groups:
-            for k in g.keys:
+            for k in self._all(g):
                 counts[k] = counts.get(k, 0) + 1
         chosen = [g for g in self.groups if any(k in table and counts[k] == 1 for k in g.keys)]
+        if not chosen and self.partial:
+            chosen = [g for g in self.groups if any(k in table and counts[k] == 1 for k in g.extras)]
         options = _or([g.label() for g in self.groups])
         if len(chosen) > 1 or (self.required and not chosen):
             given = [k for k in self.keys() if k in table]

@@ -15,17 +15,18 @@
 //!
 //! The Neo-Hookean model has closed forms that the element kernels use (its tangent is
 //! isotropic: [`super::set_isotropic_tet_hessian`] and the analytic projection); other models
-//! go through their 9x9 rest tangent ([`super::add_tet_hessian`], [`project_to_psd`]).
+//! go through their 9x9 tangent, the volumetric term folded into the model's own pass
+//! ([`Hyperelastic::rest_with_volumetric`], [`super::set_tet_hessian`], [`project_to_psd`]).
 
 pub use super::pressure_iterates::{LinearisedPressure, PressureIterates, PressureLinearisations};
 use super::{
-    add_tet_gradient, add_tet_hessian, set_isotropic_tet_hessian,
-    set_projected_isotropic_tet_hessian, HessianMode, ParamTerm, Term,
+    add_tet_gradient, set_isotropic_tet_hessian, set_projected_isotropic_tet_hessian,
+    set_tet_hessian, HessianMode, ParamTerm, Term,
 };
 use crate::material::neo_hookean::j_minus_one;
 use crate::material::{
-    inverse_transpose, project_to_psd, volumetric_tangent, ElementMaterial, Hyperelastic, Mat3,
-    MaterialModel, NeoHookean, Volumetric,
+    inverse_transpose, project_to_psd, ElementMaterial, Hyperelastic, Mat3, MaterialModel,
+    NeoHookean, Tangent, VolumeState, Volumetric, VolumetricTerm,
 };
 use crate::mesh::TetMesh;
 use nalgebra::Vector3;
@@ -319,8 +320,9 @@ impl ElasticTerm {
         volume * r.energy
     }
 
-    /// Standard formulation, any model: the rest part through its 9x9 tangent, the volumetric
-    /// part `kappa/2 c(J)^2` through its isotropic form.
+    /// Standard formulation, any model: the rest part and the volumetric term `kappa/2 c(J)^2`
+    /// in one pass of the model ([`Hyperelastic::rest_with_volumetric`]), the element Hessian
+    /// from the resulting 9x9 tangent.
     fn standard_general(
         &self,
         e: usize,
@@ -331,27 +333,31 @@ impl ElasticTerm {
         mode: HessianMode,
     ) -> f64 {
         let h = self.displacement_gradient(e, z);
-        let (Some(rest), Some((gt, j))) = (
-            material.rest(&h, hess.is_some()),
-            inverse_transpose(&(Mat3::identity() + h)),
-        ) else {
+        let Some(state) = VolumeState::new(&h) else {
             return f64::INFINITY;
         };
         let kappa = self.bulk[e];
-        let (c, dc, d2c) = material.volumetric().measure_near_one(j_minus_one(&h));
+        let measure = material.volumetric().measure_near_one(state.jm1);
+        let mut volumetric = VolumetricTerm::quadratic(kappa, measure);
+        if hess.is_some() {
+            let (c, dc, d2c) = measure;
+            let pressure = self.hessian_pressure(e, kappa, &state.gt, state.j, c, dc);
+            volumetric.tangent_slope = pressure * dc;
+            volumetric.tangent_curvature = kappa * dc * dc + pressure * d2c;
+        }
+        let Some(r) = material.rest_with_volumetric(&h, &state, &volumetric, hess.is_some()) else {
+            return f64::INFINITY;
+        };
         let volume = self.mesh.volumes()[e];
         let g = self.mesh.shape_gradients(e);
         if let Some(grad) = grad {
             grad.fill(0.0);
-            add_tet_gradient(volume, g, &(rest.stress + (kappa * c * dc * j) * gt), grad);
+            add_tet_gradient(volume, g, &r.stress, grad);
         }
-        if let (Some(hess), Some(tangent)) = (hess, rest.tangent) {
-            let pressure = self.hessian_pressure(e, kappa, &gt, j, c, dc);
-            let dh = pressure * dc;
-            let d2h = kappa * dc * dc + pressure * d2c;
-            set_general_tet_hessian(volume, g, &gt, j, dh, d2h, &tangent, mode, hess, 12);
+        if let (Some(hess), Some(tangent)) = (hess, r.tangent) {
+            set_tangent_tet_hessian(volume, g, &tangent, mode, hess, 12);
         }
-        volume * (rest.energy + 0.5 * kappa * c * c)
+        volume * r.energy
     }
 
     /// Mixed formulation, Neo-Hookean closed forms for the displacement block.
@@ -414,7 +420,8 @@ impl ElasticTerm {
         energy
     }
 
-    /// Mixed formulation, any model (see [`ElasticTerm::standard_general`]).
+    /// Mixed formulation, any model: `p c(J)` folded into the model's pass as the volumetric term
+    /// (see [`ElasticTerm::standard_general`]).
     #[allow(clippy::too_many_arguments)]
     fn mixed_general(
         &self,
@@ -427,31 +434,35 @@ impl ElasticTerm {
         mass: PressureMass,
     ) -> f64 {
         let h = self.displacement_gradient(e, z);
-        let (Some(rest), Some((gt, j))) = (
-            material.rest(&h, hess.is_some()),
-            inverse_transpose(&(Mat3::identity() + h)),
-        ) else {
+        let Some(state) = VolumeState::new(&h) else {
+            return f64::INFINITY;
+        };
+        let p = &z[12..16];
+        let q = 0.25 * (p[0] + p[1] + p[2] + p[3]);
+        let (c, dc, d2c) = material.volumetric().measure_near_one(state.jm1);
+        let volumetric = VolumetricTerm {
+            energy: q * c,
+            stress_slope: q * dc,
+            tangent_slope: q * dc,
+            tangent_curvature: q * d2c,
+        };
+        let Some(r) = material.rest_with_volumetric(&h, &state, &volumetric, hess.is_some()) else {
             return f64::INFINITY;
         };
         let volume = self.mesh.volumes()[e];
         let g = self.mesh.shape_gradients(e);
-        let p = &z[12..16];
-        let q = 0.25 * (p[0] + p[1] + p[2] + p[3]);
-        let (c, dc, d2c) = material.volumetric().measure_near_one(j_minus_one(&h));
         let cp = self.compliance_times(e, p, mass);
-        let energy =
-            volume * (rest.energy + q * c) - 0.5 * (0..4).map(|a| p[a] * cp[a]).sum::<f64>();
-        let dvol_stress = dc * j * gt;
+        let energy = volume * r.energy - 0.5 * (0..4).map(|a| p[a] * cp[a]).sum::<f64>();
         if let Some(grad) = grad {
             grad.fill(0.0);
-            add_tet_gradient(volume, g, &(rest.stress + q * dvol_stress), grad);
+            add_tet_gradient(volume, g, &r.stress, grad);
             for a in 0..4 {
                 grad[12 + a] = 0.25 * volume * c - cp[a];
             }
         }
-        if let (Some(hess), Some(tangent)) = (hess, rest.tangent) {
-            let (dh, d2h) = (q * dc, q * d2c);
-            set_general_tet_hessian(volume, g, &gt, j, dh, d2h, &tangent, mode, hess, 16);
+        if let (Some(hess), Some(tangent)) = (hess, r.tangent) {
+            set_tangent_tet_hessian(volume, g, &tangent, mode, hess, 16);
+            let dvol_stress = dc * state.j * state.gt;
             self.set_pressure_blocks(e, volume, g, &dvol_stress, mass, hess);
         }
         energy
@@ -485,36 +496,22 @@ impl ElasticTerm {
     }
 }
 
-/// Writes the displacement block of a `stride`-wide element Hessian from a model's rest
-/// tangent `A_rest` (9x9) and a volumetric energy `h(J)` with `h' = dh`, `h'' = d2h`:
-/// `A = A_rest + (h'' J^2 + h' J) G (x) G - h' J G_il G_kj`. Exact: the volumetric part in its
-/// isotropic form, then the rest tangent added; projected: `A` projected to positive
-/// semi-definite as one 9x9 matrix.
-#[allow(clippy::too_many_arguments)]
-fn set_general_tet_hessian(
+/// Writes the displacement block of a `stride`-wide element Hessian from a model's whole 9x9
+/// tangent `A` (rest and volumetric parts): exact, or with `A` projected to positive
+/// semi-definite first ([`project_to_psd`]: its negative eigenvalues clamped to zero, so that the
+/// element Hessian `V B^T A B` is positive semi-definite too).
+fn set_tangent_tet_hessian(
     volume: f64,
     g: &[Vector3<f64>; 4],
-    gt: &Mat3,
-    j: f64,
-    dh: f64,
-    d2h: f64,
-    rest_tangent: &crate::material::Tangent,
+    tangent: &Tangent,
     mode: HessianMode,
     hess: &mut [f64],
     stride: usize,
 ) {
     match mode {
-        HessianMode::Exact => {
-            let (alpha, beta) = (-dh * j, d2h * j * j + dh * j);
-            set_isotropic_tet_hessian(volume, g, gt, 0.0, alpha, beta, &[], hess, stride);
-            add_tet_hessian(volume, g, rest_tangent, hess, stride);
-        }
+        HessianMode::Exact => set_tet_hessian(volume, g, tangent, hess, stride),
         HessianMode::Projected => {
-            let tangent = project_to_psd(&(rest_tangent + volumetric_tangent(gt, j, dh, d2h)));
-            for row in 0..12 {
-                hess[row * stride..row * stride + 12].fill(0.0);
-            }
-            add_tet_hessian(volume, g, &tangent, hess, stride);
+            set_tet_hessian(volume, g, &project_to_psd(tangent), hess, stride)
         }
     }
 }

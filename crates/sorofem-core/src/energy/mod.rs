@@ -84,27 +84,59 @@ pub(crate) fn add_tet_gradient(volume: f64, g: &[Vector3<f64>; 4], p: &Mat3, gra
     }
 }
 
-/// Adds `V sum_jl A[3i+j, 3k+l] g_aj g_bl` to `hess[(3a+i) * stride + 3b+k]`: the element
-/// Hessian of a 9x9 material tangent A (models without an isotropic closed form, and the
-/// reference the isotropic shortcuts are tested against).
-pub(crate) fn add_tet_hessian(
+/// Writes `V sum_jl A[3i+j, 3k+l] g_aj g_bl` to `hess[(3a+i) * stride + 3b+k]` (the first 12
+/// rows and columns; every entry, no zeroing needed): the element Hessian of a symmetric 9x9
+/// material tangent A, with `g_0 = -(g_1 + g_2 + g_3)` (how [`TetMesh`](crate::mesh::TetMesh)
+/// builds it). With `W_b[3i+j, k] = V sum_l A[3i+j, 3k+l] g_bl` for nodes 1 to 3, the blocks
+/// among them are `K_ab[i, k] = sum_j g_aj W_b[3i+j, k]` (only `a >= b` computed, the others
+/// their transposes as A is symmetric), and node 0's blocks follow from `g_0`: `H_a0 = -sum_b
+/// K_ab`, `H_0b` its transpose, `H_00 = sum_ab K_ab`. About 400 products instead of 1300.
+pub(crate) fn set_tet_hessian(
     volume: f64,
     g: &[Vector3<f64>; 4],
     a: &Tangent,
     hess: &mut [f64],
     stride: usize,
 ) {
-    for i in 0..3 {
+    let mut w = [[[0.0; 3]; 9]; 3];
+    for (b, w_b) in w.iter_mut().enumerate() {
+        let gb = g[b + 1] * volume;
         for k in 0..3 {
-            let block = a.fixed_view::<3, 3>(3 * i, 3 * k);
-            let w: [Vector3<f64>; 4] = std::array::from_fn(|b| block * g[b]);
-            for aa in 0..4 {
-                for b in 0..4 {
-                    hess[(3 * aa + i) * stride + 3 * b + k] += volume * g[aa].dot(&w[b]);
-                }
+            let (c0, c1, c2) = (a.column(3 * k), a.column(3 * k + 1), a.column(3 * k + 2));
+            for (row, w_row) in w_b.iter_mut().enumerate() {
+                w_row[k] = c0[row] * gb[0] + c1[row] * gb[1] + c2[row] * gb[2];
             }
         }
     }
+    // blocks[a][b]: node a + 1's rows, node b + 1's columns.
+    let mut blocks = [[Mat3::zeros(); 3]; 3];
+    for (aa, ga) in g[1..].iter().enumerate() {
+        for (b, w_b) in w.iter().enumerate().take(aa + 1) {
+            let block = Mat3::from_fn(|i, k| {
+                ga[0] * w_b[3 * i][k] + ga[1] * w_b[3 * i + 1][k] + ga[2] * w_b[3 * i + 2][k]
+            });
+            blocks[aa][b] = block;
+            blocks[b][aa] = block.transpose();
+        }
+    }
+    let mut put = |a: usize, b: usize, block: &Mat3| {
+        for i in 0..3 {
+            for k in 0..3 {
+                hess[(3 * a + i) * stride + 3 * b + k] = block[(i, k)];
+            }
+        }
+    };
+    let mut corner = Mat3::zeros();
+    for (aa, row) in blocks.iter().enumerate() {
+        let row_sum = -(row[0] + row[1] + row[2]);
+        for (b, block) in row.iter().enumerate() {
+            put(aa + 1, b + 1, block);
+        }
+        put(aa + 1, 0, &row_sum);
+        put(0, aa + 1, &row_sum.transpose());
+        corner -= row_sum;
+    }
+    put(0, 0, &corner);
 }
 
 /// Writes the displacement block (the first 12 rows and columns of a `stride`-wide element
@@ -193,6 +225,59 @@ mod tests {
     use super::*;
     use crate::material::{project_to_psd, Tangent};
     use nalgebra::Rotation3;
+
+    /// Adds `V sum_jl A[3i+j, 3k+l] g_aj g_bl` to `hess[(3a+i) * stride + 3b+k]`, term by term:
+    /// the reference the element Hessians of [`set_tet_hessian`] and the isotropic shortcuts are
+    /// tested against.
+    fn add_tet_hessian(
+        volume: f64,
+        g: &[Vector3<f64>; 4],
+        a: &Tangent,
+        hess: &mut [f64],
+        stride: usize,
+    ) {
+        for i in 0..3 {
+            for k in 0..3 {
+                let block = a.fixed_view::<3, 3>(3 * i, 3 * k);
+                let w: [Vector3<f64>; 4] = std::array::from_fn(|b| block * g[b]);
+                for aa in 0..4 {
+                    for b in 0..4 {
+                        hess[(3 * aa + i) * stride + 3 * b + k] += volume * g[aa].dot(&w[b]);
+                    }
+                }
+            }
+        }
+    }
+
+    /// The blocked element Hessian (node 0's blocks from the others) against the term-by-term
+    /// sum, on a symmetric tangent, with a stride of 16 (the mixed formulation's) whose pressure entries
+    /// must stay untouched.
+    #[test]
+    fn tet_hessian_matches_the_term_by_term_sum() {
+        let (g1, g2, g3) = (
+            Vector3::new(1.3, 0.2, 0.1),
+            Vector3::new(-0.1, 0.5, -0.3),
+            Vector3::new(0.2, 0.0, 0.4),
+        );
+        let g = [-(g1 + g2 + g3), g1, g2, g3];
+        let m = Tangent::from_fn(|r, c| ((r * 7 + c * 3) % 11) as f64 - 5.0 + 0.1 * (r * c) as f64);
+        let a = m + m.transpose();
+        let mut reference = vec![0.0; 256];
+        add_tet_hessian(0.7, &g, &a, &mut reference, 16);
+        let mut blocked = vec![f64::NAN; 256];
+        set_tet_hessian(0.7, &g, &a, &mut blocked, 16);
+        let scale = reference.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        for row in 0..16 {
+            for col in 0..16 {
+                let (x, y) = (blocked[row * 16 + col], reference[row * 16 + col]);
+                if row < 12 && col < 12 {
+                    assert!((x - y).abs() <= 1e-14 * scale, "({row}, {col}): {x} vs {y}");
+                } else {
+                    assert!(x.is_nan(), "({row}, {col}) written");
+                }
+            }
+        }
+    }
 
     /// The analytic projection against a 9x9 eigendecomposition of the same tangent, over
     /// compressed, stretched and sheared states and both signs of alpha and beta (the mixed

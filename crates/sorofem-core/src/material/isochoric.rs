@@ -16,8 +16,8 @@
 //! differences of first-order terms; they are expanded below so that only second-order
 //! (resp. first-order) quantities are added.
 
-use super::neo_hookean::j_minus_one;
-use super::{inverse_transpose, Mat3, Tangent};
+use super::law::VolumeState;
+use super::{Mat3, Tangent};
 use crate::error::{Error, Result};
 
 /// F-dependent quantities shared by the invariants at one `H = F - I`.
@@ -47,23 +47,33 @@ pub struct BarInvariant {
 impl Kinematics {
     /// `None` when `J <= 0`.
     pub fn new(h: &Mat3) -> Option<Self> {
-        let f = Mat3::identity() + h;
-        let (g, j) = inverse_transpose(&f)?;
-        let jm1 = j_minus_one(h);
-        let t = h.trace();
-        let q = 0.5 * (t * t - (h * h).trace()) + h.determinant();
-        let y = (jm1.ln_1p() / 3.0).exp_m1();
-        let cube_root = 1.0 + y;
-        Some(Kinematics {
+        Some(Self::at(h, &VolumeState::new(h)?))
+    }
+
+    /// From the volume state of the same `H` (computed once by the element kernels).
+    pub fn at(h: &Mat3, volume: &VolumeState) -> Self {
+        // J - 1 = tr H + q; and J^(1/3) - 1 = (J - 1) / (c^2 + c + 1) with c = J^(1/3), free of
+        // the cancellation of c - 1.
+        let cube_root = volume.j.cbrt();
+        Kinematics {
             h: *h,
-            f,
-            g,
-            j,
-            jm1,
-            q,
-            y,
+            f: Mat3::identity() + h,
+            g: volume.gt,
+            j: volume.j,
+            jm1: volume.jm1,
+            q: volume.jm1 - h.trace(),
+            y: volume.jm1 / (cube_root * cube_root + cube_root + 1.0),
             j23: 1.0 / (cube_root * cube_root),
-        })
+        }
+    }
+
+    /// The volume state these kinematics were built from.
+    pub fn volume(&self) -> VolumeState {
+        VolumeState {
+            gt: self.g,
+            j: self.j,
+            jm1: self.jm1,
+        }
     }
 
     /// `F - G = H + G H^T` (because `G H^T = G F^T - G = I - G`), first order in H.
@@ -196,6 +206,88 @@ pub fn add_bar_i2_hessian(kin: &Kinematics, i2: &BarInvariant, coeff: f64, t: &m
                 t[(row, 3 * m + j)] += c_swap * b[(i, m)];
             }
         }
+    }
+}
+
+/// How a decoupled model shares its volumetric energy `kappa/2 (J - 1)^2` (`kappa = 2/d1`, Pa)
+/// between its rest part and its primary volumetric term (the one the mixed formulation turns
+/// into the pressure field):
+///
+/// ```text
+/// kappa_s = a kappa / (a + kappa),   a = 2 mu0 / 3          (mu0: small-strain shear modulus)
+/// W_rest  = W_iso + kappa_s/2 (J - 1)^2,   primary term (kappa - kappa_s)/2 (J - 1)^2
+/// kappa - kappa_s = kappa^2 / (a + kappa)
+/// ```
+///
+/// An isochoric energy has no stiffness against dilation, so without this share the mixed
+/// formulation's displacement block would have none either, and Newton's method wanders far
+/// from the solution on nearly incompressible bodies (as does the standard formulation, whose
+/// primary term's Hessian is taken at pressure iterates). The compressible Neo-Hookean's rest part carries the same `2 mu/3` through
+/// its `-mu ln J`. `kappa_s -> a` for nearly incompressible materials and stays below `kappa`,
+/// so the primary term keeps a positive modulus for every `d1 > 0`. The energy is unchanged; the
+/// mixed compliance is `1/(kappa - kappa_s) = d1/2 + a d1^2/4`, which still vanishes as d1 -> 0.
+#[derive(Clone, Copy, Debug)]
+pub struct BulkSplit {
+    /// `kappa_s` (Pa), kept in the rest part.
+    pub rest: f64,
+    /// `kappa - kappa_s` (Pa), the primary volumetric term's modulus.
+    pub primary: f64,
+    /// `a` and `kappa` (Pa).
+    a: f64,
+    kappa: f64,
+}
+
+impl BulkSplit {
+    /// From the small-strain shear modulus `mu0 > 0` (Pa) and `d1 > 0` (1/Pa).
+    #[inline]
+    pub fn new(shear: f64, d1: f64) -> Self {
+        let kappa = 2.0 / d1;
+        let a = 2.0 / 3.0 * shear;
+        let share = kappa / (a + kappa);
+        BulkSplit {
+            rest: a * share,
+            primary: kappa * share,
+            a,
+            kappa,
+        }
+    }
+
+    /// `d kappa_s / d theta_k` for every parameter, from `d mu0 / d theta_k` and
+    /// `d kappa / d theta_k`.
+    pub fn rest_gradient(&self, d_shear: &[f64], d_bulk: &[f64]) -> Vec<f64> {
+        // d kappa_s / d a = (kappa / (a + kappa))^2, d kappa_s / d kappa = (a / (a + kappa))^2.
+        let sum = self.a + self.kappa;
+        let d_rest_d_shear = 2.0 / 3.0 * (self.kappa / sum).powi(2);
+        let d_rest_d_bulk = (self.a / sum).powi(2);
+        d_shear
+            .iter()
+            .zip(d_bulk)
+            .map(|(s, b)| d_rest_d_shear * s + d_rest_d_bulk * b)
+            .collect()
+    }
+
+    /// Adds the derivatives of the rest part's `kappa_s/2 (J - 1)^2` with respect to every
+    /// parameter, `(J - 1)^2/2 dkappa_s` to `energy` and `(J - 1) J F^{-T} dkappa_s` to `stress`.
+    pub fn add_rest_param_gradient(
+        &self,
+        volume: &VolumeState,
+        d_shear: &[f64],
+        d_bulk: &[f64],
+        energy: &mut [f64],
+        stress: &mut [Mat3],
+    ) {
+        let x = volume.jm1;
+        let jg = volume.j * volume.gt;
+        for (k, d) in self.rest_gradient(d_shear, d_bulk).into_iter().enumerate() {
+            energy[k] += 0.5 * x * x * d;
+            stress[k] += (x * d) * jg;
+        }
+    }
+
+    /// `d (kappa - kappa_s) / d theta_k`.
+    pub fn primary_gradient(&self, d_shear: &[f64], d_bulk: &[f64]) -> Vec<f64> {
+        let rest = self.rest_gradient(d_shear, d_bulk);
+        d_bulk.iter().zip(rest).map(|(b, r)| b - r).collect()
     }
 }
 

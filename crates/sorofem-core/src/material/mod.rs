@@ -14,7 +14,7 @@ pub mod neo_hookean;
 pub mod ogden;
 pub mod yeoh;
 
-pub use law::{Hyperelastic, RestParamGradient};
+pub use law::{Hyperelastic, RestParamGradient, VolumeState, VolumetricTerm};
 pub use mooney_rivlin::MooneyRivlin;
 pub use neo_hookean::{NeoHookean, Response, Volumetric};
 pub use ogden::Ogden;
@@ -28,21 +28,44 @@ use crate::error::{Error, Result};
 pub enum MaterialModel {
     /// Compressible Neo-Hookean ([`NeoHookean`]): `mu`, `lambda` (Pa).
     NeoHookean { volumetric: Volumetric },
+    /// Decoupled Mooney-Rivlin ([`MooneyRivlin`]): `c10`, `c01` (Pa), `d1` (1/Pa).
+    MooneyRivlin,
+    /// Decoupled Yeoh ([`Yeoh`]): `c10`, `c20`, `c30` (Pa), `d1`, `d2`, `d3` (1/Pa).
+    Yeoh,
+    /// Decoupled Ogden ([`Ogden`]) of `terms` (1 to 3) terms: `mu:p` (Pa), `alpha:p`, then `d1`
+    /// (1/Pa). Build it with [`MaterialModel::ogden`].
+    Ogden { terms: usize },
 }
 
 impl MaterialModel {
+    /// The Ogden model of `terms` terms; an error unless `1 <= terms <= 3`.
+    pub fn ogden(terms: usize) -> Result<Self> {
+        if (1..=ogden::MAX_TERMS).contains(&terms) {
+            Ok(MaterialModel::Ogden { terms })
+        } else {
+            Err(Error::invalid("terms", "1, 2 or 3 Ogden terms", terms))
+        }
+    }
+
     /// The model's name as the bindings spell it.
     pub fn name(&self) -> &'static str {
         match self {
             MaterialModel::NeoHookean { .. } => "neo_hookean",
+            MaterialModel::MooneyRivlin => "mooney_rivlin",
+            MaterialModel::Yeoh => "yeoh",
+            MaterialModel::Ogden { .. } => "ogden",
         }
     }
 
     /// Parameter names, in storage order.
     pub fn param_names(&self) -> Vec<String> {
-        match self {
-            MaterialModel::NeoHookean { .. } => NeoHookean::PARAM_NAMES.map(String::from).to_vec(),
-        }
+        let names: &[&str] = match self {
+            MaterialModel::NeoHookean { .. } => &NeoHookean::PARAM_NAMES,
+            MaterialModel::MooneyRivlin => &MooneyRivlin::PARAM_NAMES,
+            MaterialModel::Yeoh => &Yeoh::PARAM_NAMES,
+            MaterialModel::Ogden { terms } => return Ogden::param_names_of(*terms),
+        };
+        names.iter().map(|s| s.to_string()).collect()
     }
 
     /// The number of parameters per element (cheap: element kernels ask it).
@@ -50,13 +73,18 @@ impl MaterialModel {
     pub fn n_params(&self) -> usize {
         match self {
             MaterialModel::NeoHookean { .. } => NeoHookean::PARAM_NAMES.len(),
+            MaterialModel::MooneyRivlin => MooneyRivlin::PARAM_NAMES.len(),
+            MaterialModel::Yeoh => Yeoh::PARAM_NAMES.len(),
+            MaterialModel::Ogden { terms } => 2 * terms + 1,
         }
     }
 
-    /// The measure `c(J)` of the primary volumetric term (the same for every element).
+    /// The measure `c(J)` of the primary volumetric term (the same for every element): the
+    /// decoupled models' is `J - 1`.
     pub fn volumetric(&self) -> Volumetric {
         match self {
             MaterialModel::NeoHookean { volumetric } => *volumetric,
+            _ => Volumetric::Linear,
         }
     }
 
@@ -70,13 +98,42 @@ impl MaterialModel {
                 lambda: params[1],
                 volumetric,
             }),
+            MaterialModel::MooneyRivlin => ElementMaterial::MooneyRivlin(MooneyRivlin {
+                c10: params[0],
+                c01: params[1],
+                d1: params[2],
+            }),
+            MaterialModel::Yeoh => ElementMaterial::Yeoh(Yeoh {
+                c10: params[0],
+                c20: params[1],
+                c30: params[2],
+                d1: params[3],
+                d2: params[4],
+                d3: params[5],
+            }),
+            MaterialModel::Ogden { .. } => ElementMaterial::Ogden(Ogden::from_validated(params)),
         }
     }
 
     /// [`MaterialModel::at`] after the model's own checks, and for the mixed formulation (whose
     /// pressure compliance is `M_p / kappa`) a positive finite `kappa`. Errors name the
     /// parameter.
+    ///
+    /// The decoupled models need `d1 > 0` in both formulations: `kappa = 2 / d1`, so the mixed
+    /// compliance is `d1 / 2` and `d1 -> 0` approaches incompressibility, but `d1 = 0` has no
+    /// bulk modulus for the standard formulation nor a pressure mode control for the P1-P1 mixed
+    /// one. Yeoh's higher terms `(J - 1)^4 / d2` and `(J - 1)^6 / d3` stay in the rest part in
+    /// the mixed formulation (evaluated from the displacements): they have no stiffness at
+    /// `J = 1`, so they cannot lock, and only the primary term becomes the pressure field.
     pub fn try_at(&self, params: &[f64], mixed: bool) -> Result<ElementMaterial> {
+        let n = self.n_params();
+        if params.len() != n {
+            return Err(Error::shape(
+                "params",
+                format!("{n} values [{}]", self.param_names().join(", ")),
+                format!("{} values", params.len()),
+            ));
+        }
         match *self {
             MaterialModel::NeoHookean { volumetric } => {
                 let material = NeoHookean::try_new(params, volumetric)?;
@@ -90,6 +147,11 @@ impl MaterialModel {
                 }
                 Ok(ElementMaterial::NeoHookean(material))
             }
+            MaterialModel::MooneyRivlin => {
+                MooneyRivlin::try_new(params).map(ElementMaterial::MooneyRivlin)
+            }
+            MaterialModel::Yeoh => Yeoh::try_new(params).map(ElementMaterial::Yeoh),
+            MaterialModel::Ogden { .. } => Ogden::try_new(params).map(ElementMaterial::Ogden),
         }
     }
 }
@@ -98,41 +160,54 @@ impl MaterialModel {
 #[derive(Clone, Copy, Debug)]
 pub enum ElementMaterial {
     NeoHookean(NeoHookean),
+    MooneyRivlin(MooneyRivlin),
+    Yeoh(Yeoh),
+    Ogden(Ogden),
+}
+
+/// `$body` with `$m` bound to the model of every arm of an [`ElementMaterial`].
+macro_rules! each_model {
+    ($material:expr, $m:ident => $body:expr) => {
+        match $material {
+            ElementMaterial::NeoHookean($m) => $body,
+            ElementMaterial::MooneyRivlin($m) => $body,
+            ElementMaterial::Yeoh($m) => $body,
+            ElementMaterial::Ogden($m) => $body,
+        }
+    };
 }
 
 impl Hyperelastic for ElementMaterial {
     fn param_names(&self) -> Vec<String> {
-        match self {
-            ElementMaterial::NeoHookean(m) => m.param_names(),
-        }
+        each_model!(self, m => m.param_names())
     }
     #[inline]
     fn rest(&self, h: &Mat3, with_tangent: bool) -> Option<Response> {
-        match self {
-            ElementMaterial::NeoHookean(m) => m.rest(h, with_tangent),
-        }
+        each_model!(self, m => m.rest(h, with_tangent))
+    }
+    #[inline]
+    fn rest_with_volumetric(
+        &self,
+        h: &Mat3,
+        volume: &VolumeState,
+        volumetric: &VolumetricTerm,
+        with_tangent: bool,
+    ) -> Option<Response> {
+        each_model!(self, m => m.rest_with_volumetric(h, volume, volumetric, with_tangent))
     }
     #[inline]
     fn bulk(&self) -> f64 {
-        match self {
-            ElementMaterial::NeoHookean(m) => m.bulk(),
-        }
+        each_model!(self, m => m.bulk())
     }
     #[inline]
     fn volumetric(&self) -> Volumetric {
-        match self {
-            ElementMaterial::NeoHookean(m) => Hyperelastic::volumetric(m),
-        }
+        each_model!(self, m => Hyperelastic::volumetric(m))
     }
     fn rest_param_gradient(&self, h: &Mat3) -> Option<RestParamGradient> {
-        match self {
-            ElementMaterial::NeoHookean(m) => m.rest_param_gradient(h),
-        }
+        each_model!(self, m => m.rest_param_gradient(h))
     }
     fn bulk_param_gradient(&self) -> Vec<f64> {
-        match self {
-            ElementMaterial::NeoHookean(m) => m.bulk_param_gradient(),
-        }
+        each_model!(self, m => m.bulk_param_gradient())
     }
 }
 

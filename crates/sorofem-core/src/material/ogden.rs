@@ -3,7 +3,8 @@
 //! `W(F) = sum_p 2 mu_p / alpha_p^2 (λ̄1^alpha_p + λ̄2^alpha_p + λ̄3^alpha_p - 3) + (J - 1)^2 / d1`
 //! (Pa), with `λ̄_i = J^(-1/3) λ_i` and `λ_i` the principal stretches; `mu_p` in Pa, `alpha_p`
 //! dimensionless, `d1` in 1/Pa. Small-strain shear modulus `mu = sum_p mu_p`, bulk modulus
-//! `kappa = 2 / d1`. In this convention `alpha = 2` is `c10 = mu/2` and `alpha = -2` is
+//! `kappa = 2 / d1` (in the split of [`Hyperelastic`], `W_rest` is the isochoric part with the
+//! share [`BulkSplit`] of the volumetric energy). In this convention `alpha = 2` is `c10 = mu/2` and `alpha = -2` is
 //! `c01 = mu/2` of Mooney-Rivlin (`sum_i λ̄_i^-2 = Ī2` because `λ̄1 λ̄2 λ̄3 = 1`).
 //!
 //! Written in the log stretches `l_i = ln λ_i` and their deviatoric parts
@@ -29,14 +30,15 @@
 //! whose limit at `u = 0` is `alpha_p - 1`: equal stretches (the rest state) are regular points,
 //! and the eigenvectors chosen inside a repeated eigenspace do not matter.
 
-use super::isochoric::{check_d1, check_params};
-use super::law::{Hyperelastic, RestParamGradient};
+use super::isochoric::{check_d1, check_params, BulkSplit};
+use super::law::{Hyperelastic, RestParamGradient, VolumeState, VolumetricTerm};
 use super::neo_hookean::{j_minus_one, Response};
-use super::{symmetric_eigenvalues, Mat3, Tangent, Volumetric};
+use super::{symmetric_eigenvalues, volumetric_tangent, Mat3, Tangent, Volumetric};
 use crate::error::{Error, Result};
 use nalgebra::{SymmetricEigen, Vector3};
 
-const MAX_TERMS: usize = 3;
+/// The most terms a model may have.
+pub const MAX_TERMS: usize = 3;
 const NAMES: [[&str; 2]; MAX_TERMS] = [
     ["mu:0", "alpha:0"],
     ["mu:1", "alpha:1"],
@@ -106,6 +108,34 @@ impl Ogden {
         }
         check_d1(model.d1)?;
         Ok(model)
+    }
+
+    /// The parameter names of a model of `terms` terms (1 to 3), in slice order:
+    /// `mu:0, alpha:0, ..., d1`.
+    pub fn param_names_of(terms: usize) -> Vec<String> {
+        NAMES[..terms.min(MAX_TERMS)]
+            .iter()
+            .flatten()
+            .map(|s| s.to_string())
+            .chain(["d1".to_string()])
+            .collect()
+    }
+
+    /// From a slice [`Ogden::try_new`] has accepted before (the element kernels' hot path: no checks).
+    #[inline]
+    pub(crate) fn from_validated(params: &[f64]) -> Self {
+        let terms = (params.len() - 1) / 2;
+        let mut model = Ogden {
+            terms,
+            mu: [0.0; MAX_TERMS],
+            alpha: [1.0; MAX_TERMS],
+            d1: params[params.len() - 1],
+        };
+        for p in 0..terms {
+            model.mu[p] = params[2 * p];
+            model.alpha[p] = params[2 * p + 1];
+        }
+        model
     }
 
     /// From the term lists `mu` (Pa) and `alpha` of equal length 1 to 3, and `d1` (1/Pa).
@@ -309,17 +339,26 @@ fn deviator(em1: &[f64; 3]) -> [f64; 3] {
     em1.map(|x| x - mean)
 }
 
-impl Hyperelastic for Ogden {
-    fn param_names(&self) -> Vec<String> {
-        NAMES[..self.terms]
-            .iter()
-            .flatten()
-            .map(|s| s.to_string())
-            .chain(["d1".to_string()])
-            .collect()
+impl Ogden {
+    /// The share of `(J - 1)^2 / d1` in the rest part.
+    fn split(&self) -> BulkSplit {
+        BulkSplit::new(self.mu().iter().sum(), self.d1)
     }
 
-    fn rest(&self, h: &Mat3, with_tangent: bool) -> Option<Response> {
+    /// `d mu0 / d theta` and `d kappa / d theta` (`mu0 = sum_p mu_p`, `kappa = 2 / d1`).
+    fn moduli_gradients(&self) -> (Vec<f64>, Vec<f64>) {
+        let n = 2 * self.terms + 1;
+        let mut d_shear = vec![0.0; n];
+        let mut d_bulk = vec![0.0; n];
+        for p in 0..self.terms {
+            d_shear[2 * p] = 1.0;
+        }
+        d_bulk[n - 1] = -2.0 / (self.d1 * self.d1);
+        (d_shear, d_bulk)
+    }
+
+    /// The isochoric part `W_iso` with its stress and tangent (see the module docs).
+    fn isochoric(&self, h: &Mat3, with_tangent: bool) -> Option<Response> {
         let pr = Principal::new(h)?;
         let lbar = &pr.deviatoric;
         let mut energy = 0.0;
@@ -402,9 +441,39 @@ impl Hyperelastic for Ogden {
             tangent,
         })
     }
+}
 
+impl Hyperelastic for Ogden {
+    fn param_names(&self) -> Vec<String> {
+        Self::param_names_of(self.terms)
+    }
+
+    fn rest(&self, h: &Mat3, with_tangent: bool) -> Option<Response> {
+        let volume = VolumeState::new(h)?;
+        self.rest_with_volumetric(h, &volume, &VolumetricTerm::default(), with_tangent)
+    }
+
+    /// The isochoric part, then the share [`BulkSplit`] of `(J - 1)^2 / d1` and `v(J)` together.
+    fn rest_with_volumetric(
+        &self,
+        h: &Mat3,
+        volume: &VolumeState,
+        volumetric: &VolumetricTerm,
+        with_tangent: bool,
+    ) -> Option<Response> {
+        let mut r = self.isochoric(h, with_tangent)?;
+        let v = volumetric.plus_quadratic(self.split().rest, volume.jm1);
+        r.energy += v.energy;
+        r.stress += (v.stress_slope * volume.j) * volume.gt;
+        if let Some(t) = r.tangent.as_mut() {
+            *t += volumetric_tangent(&volume.gt, volume.j, v.tangent_slope, v.tangent_curvature);
+        }
+        Some(r)
+    }
+
+    /// `kappa - kappa_s` of [`BulkSplit`].
     fn bulk(&self) -> f64 {
-        2.0 / self.d1
+        self.split().primary
     }
 
     fn volumetric(&self) -> Volumetric {
@@ -434,12 +503,15 @@ impl Hyperelastic for Ogden {
         }
         energy.push(0.0);
         stress.push(Mat3::zeros());
+        let (d_shear, d_bulk) = self.moduli_gradients();
+        let volume = VolumeState::new(h)?;
+        self.split()
+            .add_rest_param_gradient(&volume, &d_shear, &d_bulk, &mut energy, &mut stress);
         Some(RestParamGradient { energy, stress })
     }
 
     fn bulk_param_gradient(&self) -> Vec<f64> {
-        let mut g = vec![0.0; 2 * self.terms + 1];
-        g[2 * self.terms] = -2.0 / (self.d1 * self.d1);
-        g
+        let (d_shear, d_bulk) = self.moduli_gradients();
+        self.split().primary_gradient(&d_shear, &d_bulk)
     }
 }

@@ -3,16 +3,16 @@
 //! `W(F) = sum_{i=1..3} c_i0 (Ī1 - 3)^i + sum_{i=1..3} (J - 1)^(2i) / d_i` (Pa), with
 //! `Ī1 = J^(-2/3) I1` (see [`super::isochoric`]); `c_i0` in Pa, `d_i` in 1/Pa, and `d2 = 0` or
 //! `d3 = 0` meaning that term is absent. Small-strain shear modulus `mu = 2 c10`, bulk modulus
-//! `kappa = 2 / d1`. In the split of [`Hyperelastic`], `kappa/2 (J - 1)^2` is the primary
-//! volumetric term and `W_rest` holds the isochoric part and the `d2`, `d3` terms.
+//! `kappa = 2 / d1`. In the split of [`Hyperelastic`], `W_rest` holds the isochoric part, the
+//! share [`BulkSplit`] of `(J - 1)^2 / d1` and the `d2`, `d3` terms, and the rest of
+//! `(J - 1)^2 / d1` is the primary volumetric term (so in the mixed formulation the `d2`, `d3`
+//! terms stay displacement-based: they have no stiffness at `J = 1` and cannot lock).
 
-use super::isochoric::{bar_i1_tangent, check_d1, check_params, Kinematics};
-use super::law::{Hyperelastic, RestParamGradient};
+use super::isochoric::{bar_i1_tangent, check_d1, check_params, BulkSplit, Kinematics};
+use super::law::{Hyperelastic, RestParamGradient, VolumeState, VolumetricTerm};
 use super::neo_hookean::Response;
 use super::{Mat3, Volumetric};
 use crate::error::{Error, Result};
-
-const PARAM_NAMES: [&str; 6] = ["c10", "c20", "c30", "d1", "d2", "d3"];
 
 /// Yeoh coefficients `c10`, `c20`, `c30` (Pa) and compressibilities `d1`, `d2`, `d3` (1/Pa).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -35,12 +35,15 @@ fn inverse_or_absent(d: f64) -> f64 {
 }
 
 impl Yeoh {
+    /// Parameter names, in the order of [`Yeoh::try_new`]'s slice.
+    pub const PARAM_NAMES: [&'static str; 6] = ["c10", "c20", "c30", "d1", "d2", "d3"];
+
     /// From `[c10, c20, c30, d1, d2, d3]`. Requires `c10 > 0` (the small-strain shear modulus is
     /// `2 c10`); `c20`, `c30` of any sign (fits commonly give `c20 < 0` for the softening at
     /// moderate strain); `d1 > 0` (see [`check_d1`]); `d2, d3 >= 0` with 0 meaning no term
     /// (a negative one would make `(J - 1)^(2i) / d_i` unbounded below); every value finite.
     pub fn try_new(params: &[f64]) -> Result<Self> {
-        check_params(&PARAM_NAMES, params)?;
+        check_params(&Self::PARAM_NAMES, params)?;
         let [c10, c20, c30, d1, d2, d3] = std::array::from_fn(|k| params[k]);
         if c10 <= 0.0 {
             return Err(Error::invalid(
@@ -81,15 +84,24 @@ impl Yeoh {
             x2 * (12.0 * inv2 + 30.0 * inv3 * x2),
         )
     }
-}
 
-impl Hyperelastic for Yeoh {
-    fn param_names(&self) -> Vec<String> {
-        PARAM_NAMES.iter().map(|s| s.to_string()).collect()
+    /// The share of `(J - 1)^2 / d1` in the rest part.
+    fn split(&self) -> BulkSplit {
+        BulkSplit::new(2.0 * self.c10, self.d1)
     }
 
-    fn rest(&self, h: &Mat3, with_tangent: bool) -> Option<Response> {
-        let kin = Kinematics::new(h)?;
+    /// `d mu0 / d theta` and `d kappa / d theta` (`mu0 = 2 c10`, `kappa = 2 / d1`).
+    fn moduli_gradients(&self) -> ([f64; 6], [f64; 6]) {
+        let d_bulk = -2.0 / (self.d1 * self.d1);
+        (
+            [2.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            [0.0, 0.0, 0.0, d_bulk, 0.0, 0.0],
+        )
+    }
+
+    /// `W_rest + v(J)` with stress and tangent (see [`Hyperelastic::rest_with_volumetric`]).
+    fn evaluate(&self, kin: &Kinematics, extra: &VolumetricTerm, with_tangent: bool) -> Response {
+        let extra = &extra.plus_quadratic(self.split().rest, kin.jm1);
         let i1 = kin.bar_i1();
         let x = i1.minus_3;
         let psi = x * (self.c10 + x * (self.c20 + x * self.c30));
@@ -98,17 +110,49 @@ impl Hyperelastic for Yeoh {
         let j = kin.j;
         let tangent = with_tangent.then(|| {
             let d2psi = 2.0 * self.c20 + 6.0 * x * self.c30;
-            bar_i1_tangent(&kin, &i1, dpsi, d2psi, d2vol * j * j + dvol * j, dvol * j)
+            let slope = dvol + extra.tangent_slope;
+            let curvature = d2vol + extra.tangent_curvature;
+            bar_i1_tangent(
+                kin,
+                &i1,
+                dpsi,
+                d2psi,
+                curvature * j * j + slope * j,
+                slope * j,
+            )
         });
-        Some(Response {
-            energy: psi + vol,
-            stress: dpsi * i1.gradient + (dvol * j) * kin.g,
+        Response {
+            energy: psi + vol + extra.energy,
+            stress: dpsi * i1.gradient + ((dvol + extra.stress_slope) * j) * kin.g,
             tangent,
-        })
+        }
+    }
+}
+
+impl Hyperelastic for Yeoh {
+    fn param_names(&self) -> Vec<String> {
+        Self::PARAM_NAMES.map(String::from).to_vec()
     }
 
+    fn rest(&self, h: &Mat3, with_tangent: bool) -> Option<Response> {
+        let kin = Kinematics::new(h)?;
+        Some(self.evaluate(&kin, &VolumetricTerm::default(), with_tangent))
+    }
+
+    /// The volumetric term goes into the one pass over the tangent's 81 entries.
+    fn rest_with_volumetric(
+        &self,
+        h: &Mat3,
+        volume: &VolumeState,
+        volumetric: &VolumetricTerm,
+        with_tangent: bool,
+    ) -> Option<Response> {
+        Some(self.evaluate(&Kinematics::at(h, volume), volumetric, with_tangent))
+    }
+
+    /// `kappa - kappa_s` of [`BulkSplit`].
     fn bulk(&self) -> f64 {
-        2.0 / self.d1
+        self.split().primary
     }
 
     fn volumetric(&self) -> Volumetric {
@@ -136,20 +180,28 @@ impl Hyperelastic for Yeoh {
         };
         let (e2, s2) = compressibility(self.d2, 4);
         let (e3, s3) = compressibility(self.d3, 6);
-        Some(RestParamGradient {
-            energy: vec![x, x * x, x * x * x, 0.0, e2, e3],
-            stress: vec![
-                i1.gradient,
-                (2.0 * x) * i1.gradient,
-                (3.0 * x * x) * i1.gradient,
-                Mat3::zeros(),
-                s2,
-                s3,
-            ],
-        })
+        let mut energy = vec![x, x * x, x * x * x, 0.0, e2, e3];
+        let mut stress = vec![
+            i1.gradient,
+            (2.0 * x) * i1.gradient,
+            (3.0 * x * x) * i1.gradient,
+            Mat3::zeros(),
+            s2,
+            s3,
+        ];
+        let (d_shear, d_bulk) = self.moduli_gradients();
+        self.split().add_rest_param_gradient(
+            &kin.volume(),
+            &d_shear,
+            &d_bulk,
+            &mut energy,
+            &mut stress,
+        );
+        Some(RestParamGradient { energy, stress })
     }
 
     fn bulk_param_gradient(&self) -> Vec<f64> {
-        vec![0.0, 0.0, 0.0, -2.0 / (self.d1 * self.d1), 0.0, 0.0]
+        let (d_shear, d_bulk) = self.moduli_gradients();
+        self.split().primary_gradient(&d_shear, &d_bulk)
     }
 }

@@ -212,6 +212,12 @@ impl Model {
         self.terms.elastic.material()
     }
 
+    /// The constructor's volumetric measure: a Neo-Hookean material's unless its options say
+    /// otherwise.
+    pub fn volumetric(&self) -> Volumetric {
+        self.volumetric
+    }
+
     /// Whether the element kernels use a model's closed forms (Neo-Hookean: isotropic Hessian,
     /// analytic projection; on by default). Off sends every model through the general path of
     /// models without them: the same results to round-off, for tests and benchmarks.

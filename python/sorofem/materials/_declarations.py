@@ -1,55 +1,20 @@
-"""Material models: each model's parameter names, units, valid ranges and conversions, declared once.
-
-A :class:`MaterialModel` lists the parameters a user may give (:class:`Parameter`: name,
-symbol, units, valid :class:`Range`, the :class:`Transform` the inverse problems optimise it
-in) and the :class:`Form` s in which they may be given: the first form is the core's own
-parameters (what the extension's ``Model.set_material`` takes), every other form comes with its
-conversion to the core's parameters and that conversion's Jacobian (for the chain rule of
-:func:`sorofem.estimate`). Everything that reads or writes material parameters reads this
-declaration: :class:`Material` (the validation and conversions behind :class:`NeoHookean`),
-:class:`sorofem.Body` (formulation-specific ranges), :mod:`sorofem.inverse` (parameter names
-and transforms, ``PARAMETERS``), the ``[material]`` table of scene files and the command line.
-
-Density is common to every model (:data:`DENSITY`). Adding a model on the Python side is one
-declaration and a short :class:`Material` subclass naming its keyword arguments::
-
-    C10 = Parameter("c10", "C10", "Pa", "first Mooney-Rivlin coefficient", Range(gt=0), LOG)
-    C01 = Parameter("c01", "C01", "Pa", "second Mooney-Rivlin coefficient", Range(ge=0), LOG)
-    D1 = Parameter("d1", "D1", "1/Pa", "volumetric compliance 2 / K", Range(gt=0), LOG,
-                   formulation_ranges=(("mixed", Range(ge=0)),))
-    MOONEY_RIVLIN = MaterialModel("mooney-rivlin", "Mooney-Rivlin", "W = c10 (I1b - 3) + ...",
-                                  parameters=(C10, C01, D1), forms=(Form(("c10", "c01", "d1")),))
-
-    class MooneyRivlin(Material, model=MOONEY_RIVLIN):
-        def __init__(self, c10, c01, d1, *, density=0.0):
-            super().__init__({"c10": c10, "c01": c01, "d1": d1}, density)
-
-and one entry in :data:`MODELS` (the scene's ``[material] model``).
-
-Examples
---------
->>> import sorofem as sf
->>> from sorofem.materials import NEO_HOOKEAN
->>> [p.name for p in NEO_HOOKEAN.parameters]
-['shear_modulus', 'lame_lambda', 'youngs_modulus', 'poisson_ratio']
->>> NEO_HOOKEAN.parameter("poisson_ratio").range.describe()
-'>= 0 and < 0.5'
->>> sf.NeoHookean(youngs_modulus=66e3, poisson_ratio=0.45).to_core()[0]  # mu, Pa
-22758.620689655174
-"""
+"""The declaration machinery of :mod:`sorofem.materials`: transforms, :class:`Parameter`,
+:class:`Form`, :class:`MaterialModel` and the :class:`Material` base class that checks and converts
+a model's values. The models themselves are declared in :mod:`sorofem.materials.neo_hookean` and
+:mod:`sorofem.materials.decoupled`."""
 
 from __future__ import annotations
 
 import math
 import numbers
 from dataclasses import dataclass
-from typing import Any, Callable, ClassVar, Mapping
+from typing import Any, Callable, Iterable, Mapping
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._validate import Range, as_float_array
-from .errors import ParameterError, ShapeError
+from .._validate import Range, as_float_array
+from ..errors import ParameterError, ShapeError
 
 __all__ = [
     "Range",
@@ -61,15 +26,9 @@ __all__ = [
     "Form",
     "MaterialModel",
     "Material",
-    "NeoHookean",
     "DENSITY",
-    "NEO_HOOKEAN",
-    "MODELS",
     "CLASSES",
-    "model",
-    "material_class",
-    "lame_from_young",
-    "young_from_lame",
+    "keywords",
 ]
 
 
@@ -165,7 +124,12 @@ class Parameter:
         ``(formulation, Range)`` pairs: stricter ranges a formulation needs (the mixed one
         divides by lambda).
     core_key
-        The key of the extension's sensitivities (``Model.adjoint``) for a core parameter.
+        For a core parameter, its name in the extension (``Model.set_material_model``'s
+        parameter keys and the sensitivities' ``Model.adjoint``/``Model.forward`` keys: ``"mu"``,
+        ``"lambda"``, ``"c10"``, ``"mu:0"``); ``"rho"`` for density.
+    default
+        The value a material class takes when the parameter is not given (Yeoh's ``c20 = 0``);
+        None: required. Scene files read it too.
     """
 
     name: str
@@ -176,6 +140,7 @@ class Parameter:
     transform: Transform = LOG
     formulation_ranges: tuple[tuple[str, Range], ...] = ()
     core_key: str = ""
+    default: float | None = None
 
     def check(self, values: ArrayLike) -> None:
         """Raise a :class:`ParameterError` naming this parameter when a value is out of range."""
@@ -236,6 +201,13 @@ class MaterialModel:
         convert to it.
     fields
         Core parameters :func:`sorofem.estimate` may fit per element (``"<name>_field"``).
+    core_name
+        The extension's name of the model (``Model.set_material_model``): ``"neo_hookean"``.
+    core_options
+        The model options the extension takes with it (Ogden's ``("terms", 2)``).
+
+    A parameter named ``"base:k"`` is component k of a vector given as one keyword ``base``
+    (Ogden's ``mu=[...]`` holds ``"mu:0"``, ``"mu:1"``, ...): :func:`keywords` groups them.
     """
 
     name: str
@@ -244,6 +216,8 @@ class MaterialModel:
     parameters: tuple[Parameter, ...]
     forms: tuple[Form, ...]
     fields: tuple[str, ...] = ()
+    core_name: str = ""
+    core_options: tuple[tuple[str, Any], ...] = ()
 
     def parameter(self, name: str) -> Parameter:
         """The declaration of ``name`` (density included)."""
@@ -278,6 +252,12 @@ class MaterialModel:
             ordered[0] if ordered else self.forms[-1].names[0],
         )
 
+    def keywords(self, form: Form | None = None) -> tuple[str, ...]:
+        """The material class's keywords for ``form`` (default: every form's), vectors grouped:
+        ``("mu", "alpha", "d1")`` for Ogden."""
+        forms = self.forms if form is None else (form,)
+        return keywords([name for f in forms for name in f.names])
+
     def estimable(self) -> tuple[str, ...]:
         """The :func:`sorofem.estimate` names of this model: its parameters, density and the
         per-element fields."""
@@ -285,92 +265,15 @@ class MaterialModel:
 
 
 # ---------------------------------------------------------------------------
-# Neo-Hookean
 
 
-def lame_from_young(E: Any, nu: Any) -> tuple[Any, Any]:
-    """``(mu, lambda)`` from Young's modulus and Poisson's ratio, elementwise:
-    ``mu = E / (2 (1 + nu))``, ``lambda = E nu / ((1 + nu)(1 - 2 nu))`` (Pa)."""
-    nu = np.asarray(nu)
-    return np.divide(E, 2 * (1 + nu)), np.divide(np.multiply(E, nu), (1 + nu) * (1 - 2 * nu))
-
-
-def young_from_lame(mu: Any, lam: Any) -> tuple[Any, Any]:
-    """``(E, nu)`` from the Lame parameters, elementwise: ``E = mu (3 lambda + 2 mu) / (lambda + mu)``,
-    ``nu = lambda / (2 (lambda + mu))``."""
-    mu, lam = np.asarray(mu), np.asarray(lam)
-    return mu * (3 * lam + 2 * mu) / (lam + mu), lam / (2 * (lam + mu))
-
-
-def _lame_jacobian(E: Any, nu: Any) -> tuple[tuple[Any, Any], tuple[Any, Any]]:
-    """``((dmu/dE, dlambda/dE), (dmu/dnu, dlambda/dnu))`` of :func:`lame_from_young`."""
-    return (
-        (1 / (2 * (1 + nu)), nu / ((1 + nu) * (1 - 2 * nu))),
-        (-E / (2 * (1 + nu) ** 2), E * (1 + 2 * nu**2) / ((1 + nu) ** 2 * (1 - 2 * nu) ** 2)),
-    )
+def keywords(names: Iterable[str]) -> tuple[str, ...]:
+    """Parameter names as a material class's keywords: ``"mu:0"``, ``"mu:1"`` -> ``"mu"``."""
+    return tuple(dict.fromkeys(name.partition(":")[0] for name in names))
 
 
 #: Density, common to every model: it only matters under gravity and in dynamics.
 DENSITY = Parameter("density", "rho", "kg/m^3", "density", Range(ge=0), core_key="rho")
-
-_MIXED_LAMBDA = Range(
-    gt=0,
-    low_note="formulation='mixed' divides by lambda (compliance C = M_p / lambda); use formulation='standard' "
-    "for nu = 0",
-)
-
-NEO_HOOKEAN = MaterialModel(
-    name="neo-hookean",
-    title="compressible Neo-Hookean",
-    energy="W = mu/2 (I1 - 3) - mu ln J + lambda/2 c(J)^2, c(J) = ln J or J - 1",
-    parameters=(
-        Parameter("shear_modulus", "mu", "Pa", "shear modulus", Range(gt=0), core_key="mu"),
-        Parameter(
-            "lame_lambda", "lambda", "Pa", "Lame's first parameter",
-            Range(ge=0, low_note="compressible Neo-Hookean needs lambda >= 0"),
-            formulation_ranges=(("mixed", _MIXED_LAMBDA),), core_key="lam",
-        ),
-        Parameter("youngs_modulus", "E", "Pa", "Young's modulus", Range(gt=0)),
-        Parameter(
-            "poisson_ratio", "nu", "", "Poisson's ratio",
-            Range(
-                ge=0, lt=0.5,
-                low_note="this compressible Neo-Hookean needs lame_lambda >= 0, i.e. nu >= 0",
-                high_note="nu = 0.5 means lame_lambda = inf; both formulations need a finite lambda, the mixed one "
-                "because its P1-P1 pressure modes are controlled only by the compliance M_p / lambda; model "
-                "nearly incompressible silicone with e.g. nu = 0.4999 and formulation='mixed'",
-            ),
-            transform=logit(0.5),
-        ),
-    ),
-    forms=(
-        Form(("shear_modulus", "lame_lambda")),
-        Form(
-            ("youngs_modulus", "poisson_ratio"),
-            to_core=lame_from_young,
-            from_core=young_from_lame,
-            jacobian=_lame_jacobian,
-            blame=(("shear_modulus", "youngs_modulus"), ("lame_lambda", "poisson_ratio")),
-        ),
-    ),
-    fields=("shear_modulus", "lame_lambda"),
-)
-
-#: Every model, by its scene name.
-MODELS: dict[str, MaterialModel] = {NEO_HOOKEAN.name: NEO_HOOKEAN}
-
-
-def model(name: str) -> MaterialModel:
-    """The declaration of the model called ``name`` (a key of :data:`MODELS`).
-
-    Raises
-    ------
-    ParameterError
-        No such model.
-    """
-    if not isinstance(name, str) or name not in MODELS:
-        raise ParameterError(f"model: expected one of {list(MODELS)}, got {name!r}", "model")
-    return MODELS[name]
 
 
 # ---------------------------------------------------------------------------
@@ -409,19 +312,6 @@ def _plain(value: Any) -> Any:
 CLASSES: dict[str, type[Material]] = {}
 
 
-def material_class(name: str) -> type[Material]:
-    """The class of the model called ``name`` (:class:`NeoHookean` for ``"neo-hookean"``).
-
-    Raises
-    ------
-    ParameterError
-        No such model.
-    """
-    if not isinstance(name, str) or name not in CLASSES:
-        raise ParameterError(f"model: expected one of {list(CLASSES)}, got {name!r}", "model")
-    return CLASSES[name]
-
-
 def _getter(p: Parameter) -> Callable[[Material], Any]:
     def get(self: Material) -> Any:
         return self.value(p.name)
@@ -443,9 +333,18 @@ class Material:
         Parameter name -> value (None: not given); the names given must be exactly one form.
     density
         kg/m^3, >= 0.
+
+    Attributes
+    ----------
+    model
+        The declaration (a class attribute; an Ogden material carries the one of its term count).
+    source
+        Where the values come from (:data:`sorofem.materials.library` entries: the citation,
+        location and quote), or None; :meth:`to_dict` includes it.
     """
 
-    model: ClassVar[MaterialModel]
+    model: MaterialModel
+    source: Mapping[str, Any] | None = None
 
     def __init_subclass__(cls, model: MaterialModel | None = None, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -453,7 +352,7 @@ class Material:
             cls.model = model
             CLASSES[model.name] = cls
             for p in (*model.parameters, DENSITY):
-                if p.name not in cls.__dict__:
+                if p.name not in cls.__dict__ and p.name.isidentifier():
                     setattr(cls, p.name, property(_getter(p), doc=f"{p.symbol}, {p.units or 'dimensionless'}."))
 
     def __init__(self, values: Mapping[str, ArrayLike | None], density: ArrayLike = 0.0) -> None:
@@ -502,7 +401,7 @@ class Material:
 
     def per_element(self, n_tets: int) -> tuple[NDArray[np.float64], ...]:
         """The core's parameters and the density, each ``(n_tets,)`` float64: the arguments of
-        the extension's ``Model.set_material`` (for Neo-Hookean ``(mu, lam, rho)``).
+        :meth:`core_material` (for Neo-Hookean ``(mu, lambda, rho)``).
 
         Raises
         ------
@@ -526,6 +425,53 @@ class Material:
             out.append(np.ascontiguousarray(value))
         return tuple(out)
 
+    def core_material(self, n_tets: int) -> tuple[str, dict[str, NDArray[np.float64]], NDArray[np.float64], dict[str, Any] | None]:
+        """The arguments of the extension's ``Model.set_material_model``: the core's model
+        name, its parameters by core name (each ``(n_tets,)``), the density ``(n_tets,)`` and
+        the model's options (None: none).
+
+        Raises
+        ------
+        ParameterError
+            As :meth:`per_element`.
+        """
+        *core, density = self.per_element(n_tets)
+        names = [self.model.parameter(n).core_key for n in self.model.core_form.names]
+        return self.model.core_name, dict(zip(names, core)), density, dict(self.model.core_options) or None
+
+    def keyword_values(self, form: Form | None = None) -> dict[str, Any]:
+        """The values of ``form``'s parameters (default: the form given) as the class's keyword
+        arguments, vectors grouped (Ogden's ``mu=[...]``); density not included."""
+        names = (form or self._form).names
+        out: dict[str, Any] = {}
+        for name in names:
+            base, vector, _ = name.partition(":")
+            if vector:
+                out.setdefault(base, []).append(self._values[name])
+            else:
+                out[name] = self._values[name]
+        return out
+
+    def with_values(self, values: Mapping[str, Any], density: ArrayLike) -> "Material":
+        """A material of the same class (and, for Ogden, term count) from the values of the
+        core's parameters by name (``self.model.core_form.names``; scalars or per-element
+        arrays) and ``density``; checked like the constructor's."""
+        kwargs: dict[str, Any] = {}
+        for name in self.model.core_form.names:
+            base, vector, _ = name.partition(":")
+            if vector:
+                kwargs.setdefault(base, []).append(values[name])
+            else:
+                kwargs[name] = values[name]
+        return type(self)(**kwargs, density=density)
+
+    def with_source(self, source: Mapping[str, Any]) -> "Material":
+        """This material, saying where its values come from (``source``: plain data for
+        ``summary.json``)."""
+        out = type(self)(**self.keyword_values(), density=self._values[DENSITY.name])
+        out.source = dict(source)
+        return out
+
     def check_formulation(self, formulation: str, n_tets: int) -> None:
         """Raise a :class:`ParameterError` when a core value breaks ``formulation``'s stricter
         range (lambda > 0 for ``"mixed"``), naming the parameter as given."""
@@ -545,96 +491,34 @@ class Material:
             )
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain summary (per-element arrays as their min and max), every parameter of the model."""
+        """Plain summary: the model, every parameter (per-element arrays as their min and max;
+        vectors as lists, Ogden's ``"mu": [...]``), density, and the source when there is one."""
 
         def plain(v: Any) -> Any:
+            if isinstance(v, list):
+                return [plain(x) for x in v]
             if np.ndim(v) == 0:
                 return float(v)
             return {"min": float(np.min(v)), "max": float(np.max(v)), "per_element": True}
 
-        return {"model": self.model.name, **{name: plain(self._values[name]) for name in self.model.names}}
+        values: dict[str, Any] = {}
+        for name in self.model.names:
+            base, vector, _ = name.partition(":")
+            if vector:
+                values.setdefault(base, []).append(self._values[name])
+            else:
+                values[name] = self._values[name]
+        out = {"model": self.model.name, **{name: plain(v) for name, v in values.items()}}
+        if self.source is not None:
+            out["source"] = dict(self.source)
+        return out
 
     def __repr__(self) -> str:
         def fmt(v: Any) -> str:
+            if isinstance(v, list):
+                return "[" + ", ".join(fmt(x) for x in v) + "]"
             return f"{float(v):.6g}" if np.ndim(v) == 0 else f"<{np.size(v)} values>"
 
-        args = ", ".join(f"{name}={fmt(value)}" for name, value in self.given().items())
+        given = {**self.keyword_values(), DENSITY.name: self._values[DENSITY.name]}
+        args = ", ".join(f"{name}={fmt(value)}" for name, value in given.items())
         return f"{type(self).__name__}({args})"
-
-
-class NeoHookean(Material, model=NEO_HOOKEAN):
-    """Compressible Neo-Hookean material.
-
-    Strain energy per unit rest volume (``I1 = tr(F^T F)``, ``J = det F``)::
-
-        W = mu/2 (I1 - 3) - mu ln J + lambda/2 c(J)^2
-
-    with ``c(J) = ln J`` (default) or ``J - 1``, chosen per body (``Body(volumetric=...)``).
-
-    Give exactly one of the pairs (``youngs_modulus``, ``poisson_ratio``) or
-    (``shear_modulus``, ``lame_lambda``). Each value is a scalar or a per-element
-    array of shape ``(n_tets,)`` (checked against the mesh when the material is used by a
-    :class:`~sorofem.Body`). Names, units and ranges are declared in :data:`NEO_HOOKEAN`.
-
-    Parameters
-    ----------
-    youngs_modulus
-        E in Pa, > 0.
-    poisson_ratio
-        nu, with 0 <= nu < 0.5: lambda = E nu / ((1 + nu)(1 - 2 nu)) must be finite and
-        >= 0 (> 0 in the mixed formulation, which divides by it). Nearly incompressible
-        silicone: nu = 0.499 or 0.4999 with ``Body(..., formulation="mixed")``.
-    shear_modulus
-        mu = E / (2 (1 + nu)) in Pa, > 0.
-    lame_lambda
-        lambda in Pa, >= 0 (> 0 for the mixed formulation).
-    density
-        kg/m^3, >= 0 (only matters under gravity).
-
-    Examples
-    --------
-    >>> import sorofem as sf
-    >>> silicone = sf.NeoHookean(youngs_modulus=66e3, poisson_ratio=0.45, density=1080)
-    >>> round(silicone.shear_modulus), round(silicone.lame_lambda)
-    (22759, 204828)
-    """
-
-    def __init__(
-        self,
-        youngs_modulus: ArrayLike | None = None,
-        poisson_ratio: ArrayLike | None = None,
-        *,
-        shear_modulus: ArrayLike | None = None,
-        lame_lambda: ArrayLike | None = None,
-        density: ArrayLike = 0.0,
-    ) -> None:
-        super().__init__(
-            {"youngs_modulus": youngs_modulus, "poisson_ratio": poisson_ratio, "shear_modulus": shear_modulus,
-             "lame_lambda": lame_lambda},
-            density,
-        )
-
-    @property
-    def youngs_modulus(self) -> float | NDArray[np.float64]:
-        """E, Pa."""
-        return self.value("youngs_modulus")
-
-    @property
-    def poisson_ratio(self) -> float | NDArray[np.float64]:
-        """nu, dimensionless."""
-        return self.value("poisson_ratio")
-
-    @property
-    def shear_modulus(self) -> float | NDArray[np.float64]:
-        """mu, Pa."""
-        return self.value("shear_modulus")
-
-    @property
-    def lame_lambda(self) -> float | NDArray[np.float64]:
-        """lambda, Pa."""
-        return self.value("lame_lambda")
-
-    @property
-    def density(self) -> float | NDArray[np.float64]:
-        """rho, kg/m^3."""
-        return self.value("density")
