@@ -1,6 +1,6 @@
 //! `sorofem._core`: the Python face of sorofem-core. Plumbing only: conversions live in
 //! `convert`, error mapping in `errors`, and every class forwards to the core: `Mesh` (`mesh`),
-//! `Model` (`model`), `SolveOptions` (`options`); the obstacle and contact checks in `contact`.
+//! `Model` (`model`), `SolveOptions` (`options`), `trajectory_gradient` (`trajectory`); the obstacle and contact checks in `contact`.
 
 mod contact;
 mod convert;
@@ -8,6 +8,7 @@ mod errors;
 mod mesh;
 mod model;
 mod options;
+mod trajectory;
 
 use errors::IntoPyResult;
 use pyo3::prelude::*;
@@ -37,6 +38,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(contact::_contact_reference, m)?)?;
     m.add_function(wrap_pyfunction!(contact::check_obstacle, m)?)?;
     m.add_function(wrap_pyfunction!(contact::check_contact, m)?)?;
+    m.add_function(wrap_pyfunction!(trajectory::trajectory_gradient, m)?)?;
     m.add_class::<mesh::Mesh>()?;
     m.add_class::<model::Model>()?;
     m.add_class::<options::SolveOptions>()?;
