@@ -39,7 +39,7 @@ TRAJECTORY_PARAMETERS = ("mass_damping", "stiffness_damping", "actuation", "keyf
 #: Newton's relative tolerance of every step when none is given: the adjoint differentiates
 #: the converged step equations, so the states must satisfy them to well below the accuracy
 #: wanted of the gradient.
-DEFAULT_TOLERANCE = 1e-11
+DEFAULT_TOLERANCE = 1e-10
 
 
 @dataclass
