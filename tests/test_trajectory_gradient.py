@@ -230,3 +230,20 @@ def test_cable_dashpots_are_refused_by_name():
     body.add_cable(sf.Cable.line((0.0, 0.05, 0.02), (1, 0, 0), 0.4, 4, stiffness=3e3, damping=0.5))
     with pytest.raises(sf.ParameterError, match="cable damping"):
         _run(body)
+
+
+def test_obstacles_are_refused_by_name():
+    body = beam()
+    body.add_obstacle(sf.Plane((0, 0, -0.2), (0, 0, 1)))
+    with pytest.raises(sf.ParameterError, match="obstacles"):
+        _run(body)
+
+
+def test_a_swing_from_a_static_equilibrium_starts_there():
+    """``initial`` takes a StaticResult, as sf.simulate does: released from the equilibrium
+    under gravity, with gravity off, the beam swings back up."""
+    body = beam()
+    start = sf.solve_static(body, G, tolerance=TIGHT)
+    g = sf.trajectory_gradient(body, tip_swing(body), ["density"], dt=DT, steps=3, initial=start)
+    np.testing.assert_allclose(g.positions[0], start.positions)
+    assert g.gradient["density"] != 0.0

@@ -21,9 +21,9 @@ from .._extension import core
 from .._validate import MAX_TIME_STEPS, as_finite, describe, non_negative, positive_int, positive_scalar
 from ..body import Body, set_cable_values
 from ..cables import cable_index
-from ..dynamics import Keyframes, evaluate_schedule
+from ..dynamics import Keyframes, Trajectory, evaluate_schedule
 from ..errors import InputError, ParameterError
-from ..static import check_magnitudes
+from ..static import StaticResult, check_magnitudes
 from ..targets import BoundTarget, Target
 from ._parameters import COMMAND_PARAMETERS, Parameters, core_sensitivities
 from ._problem import bind
@@ -180,7 +180,7 @@ def trajectory_gradient(
     actuation: Any = None,
     gravity: ArrayLike = (0.0, 0.0, 0.0),
     damping: tuple[float, float] = (0.0, 0.0),
-    initial: ArrayLike | None = None,
+    initial: "ArrayLike | StaticResult | Trajectory | None" = None,
     initial_velocity: ArrayLike | None = None,
     tolerance: float = DEFAULT_TOLERANCE,
     max_iterations: int = 50,
@@ -254,8 +254,17 @@ def trajectory_gradient(
     if not np.all(rho > 0):
         raise ParameterError(f"density: dynamics needs a mass, density > 0 in every tet; got {float(rho.min())} kg/m^3", "density")
     n = body.mesh.n_nodes
-    x0 = None if initial is None else as_finite(initial, "initial", (n, 3))
-    v0 = None if initial_velocity is None else as_finite(initial_velocity, "initial_velocity", (n, 3))
+    v0: Any = None
+    if isinstance(initial, Trajectory):
+        x0: Any = initial.final_positions
+        v0 = initial.velocities
+    elif isinstance(initial, StaticResult):
+        x0 = initial.positions
+    else:
+        x0 = initial
+    x0 = None if x0 is None else as_finite(x0, "initial", (n, 3))
+    if initial_velocity is not None:
+        v0 = as_finite(initial_velocity, "initial_velocity", (n, 3))
     alphas = evaluate_schedule(body, actuation, dt, steps)
     check_magnitudes(body, g)
     evaluate = _objective_function(objective, body.mesh, dt, steps)
