@@ -211,8 +211,9 @@ def trajectory_gradient(
         Newton's relative tolerance of every step (tight by default: the adjoint is exact at
         converged states). Every step is solved by full Newton, unsplit.
     checkpoint_every
-        Keep every this many states (default ``ceil(sqrt(steps))``): memory ``(steps / k + k)``
-        states besides the positions the objective reads.
+        Keep every this many states (default ``ceil(sqrt(steps))``): memory ``steps / k + k + 1``
+        states besides the positions the objective reads; the backward sweep recomputes the
+        states between two kept ones (none with ``1``: the fastest, ``steps + 1`` states).
 
     Returns
     -------

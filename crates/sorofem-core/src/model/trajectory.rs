@@ -24,10 +24,11 @@
 //! registry's [`crate::energy::ParamTerm`]s (at `z_{k+1}`, and at `z_k` for the start force),
 //! from the lumped mass (`density`) and from the damping coefficients.
 //!
-//! Memory: the states of every `every`-th step are kept (checkpoints) and a segment's states
-//! are recomputed from its checkpoint in the backward sweep, so at most `steps / every + every`
-//! states of `n_full` values are held (`every ~ sqrt(steps)`: `2 sqrt(steps) n_full`), besides the
-//! node positions of every step that the objective reads (`(steps + 1) 3 n`).
+//! Memory: the states of every `every`-th step and the last are kept (checkpoints) and the
+//! states inside a segment are recomputed from its checkpoint in the backward sweep, so at most
+//! `steps / every + every + 1` states of `n_full + n_free` values are held (`every ~
+//! sqrt(steps)`: about `2 sqrt(steps)` states; `every = 1` keeps every state and recomputes
+//! none), besides the node positions of every step that the objective reads (`(steps + 1) 3 n`).
 
 use super::dynamics::{Damping, DynamicsOptions, StepMethod, StepSetup, StepState};
 use super::system::FactorReuse;
@@ -126,6 +127,11 @@ impl Model {
                 .push(self.converged_step(&setup, &mut state, dt, s, commands)?);
             record.positions.push(self.node_positions(&state.z));
         }
+        // The last state closes the last segment: no segment recomputes its own end.
+        checkpoints.push(Checkpoint {
+            state,
+            tensions: self.tendon_tensions(),
+        });
         let n3 = 3 * self.mesh.n_nodes();
         let d_positions = objective(&record)
             .ok_or_else(|| Error::invalid("objective", "a derivative for every frame", "none"))?;
@@ -245,7 +251,8 @@ impl Model {
             after_next: vec![0.0; n_free],
             start_force_term: vec![0.0; n_free],
         };
-        for (segment, checkpoint) in checkpoints.iter().enumerate().rev() {
+        for (segment, ends) in checkpoints.windows(2).enumerate().rev() {
+            let (checkpoint, next) = (&ends[0], &ends[1]);
             let first = segment * every;
             let last = (first + every).min(steps);
             let mut state = checkpoint.state.clone();
@@ -259,10 +266,11 @@ impl Model {
                 tendon.tension = t;
             }
             let mut states = vec![(state.clone(), checkpoint.tensions.clone())];
-            for (s, commands) in actuation.iter().enumerate().take(last).skip(first) {
+            for (s, commands) in actuation.iter().enumerate().take(last - 1).skip(first) {
                 self.converged_step(setup, &mut state, dt, s, commands)?;
                 states.push((state.clone(), self.tendon_tensions()));
             }
+            states.push((next.state.clone(), next.tensions.clone()));
             for k in (first..last).rev() {
                 let (start, _) = &states[k - first];
                 let (end, tensions) = &states[k + 1 - first];
