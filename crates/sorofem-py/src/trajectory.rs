@@ -8,7 +8,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::Mutex;
 
-/// Value-free gradient of a trajectory objective (see `Model::trajectory_gradient` in the core).
+/// The gradient of a trajectory objective (see `Model::trajectory_gradient` in the core).
 /// `objective(positions (steps + 1, n, 3)) -> d objective / d positions` as a flat float64
 /// array of `(steps + 1) 3 n` values (checked by the caller). Returns {"positions",
 /// "iterations", "params" (as `Model.adjoint`), "actuation" (steps, cables), "mass_damping",

@@ -67,8 +67,8 @@ struct Checkpoint {
 }
 
 impl Model {
-    /// Value and gradient of `J(x_0, ..., x_steps)` along the simulation of
-    /// [`Model::simulate_with`] with these arguments, every step solved by full Newton to
+    /// The gradient of an objective `J(x_0, ..., x_steps)` (its value is the caller's) along the
+    /// simulation of [`Model::simulate_with`] with these arguments, every step solved by full Newton to
     /// `newton.tolerance` (the adjoint is exact at converged states only). `objective` receives
     /// the node positions of every frame (3 n each, m) and returns `dJ/dx` of every frame
     /// (`(steps + 1) 3 n` values, J's unit per m), or `None` to stop (its error is the caller's).
