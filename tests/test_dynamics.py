@@ -389,11 +389,11 @@ def test_progress_with_free_cable_nodes_runs_in_one_piece(silicone, capsys):
 
 
 def test_chunk_errors_name_the_global_step():
-    from sorofem.dynamics import _shift_step_in_message
+    from sorofem._chunks import shift_step_in_message
 
     err = sf.ConvergenceError("time step 3 (t = 0.0400 s) did not converge even at dt = 1.563e-4 s; ...",
                               {"message": "time step 3 (t = 0.0400 s) did not converge"})
-    _shift_step_in_message(err, 20, 0.2)
+    shift_step_in_message(err, 20, 0.2)
     assert str(err).startswith("time step 23 (t = 0.2400 s) did not converge even at dt = 1.563e-4 s")
     assert err.report["message"] == "time step 23 (t = 0.2400 s) did not converge"
 

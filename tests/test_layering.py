@@ -19,7 +19,7 @@ PACKAGE = Path(__file__).resolve().parent.parent / "python" / "sorofem"
 #: The layers, lowest first. A module may import modules of lower layers only.
 LAYERS: list[tuple[str, ...]] = [
     ("errors",),
-    ("_extension", "_validate", "_version", "_deprecated", "_text", "progress"),
+    ("_extension", "_validate", "_version", "_deprecated", "_text", "progress", "_chunks"),
     ("_files",),
     ("_formats",),
     ("mesh",),

@@ -53,8 +53,8 @@ def test_keys_follow_the_scene_spec():
     assert parse_key("cable[0].actuation").per_solve and parse_key("material.region[1].shear_modulus").per_solve
     assert not parse_key("cable[0].transition").per_solve and not parse_key("mesh.box.cells").per_solve
     assert not parse_key("material.model").per_solve
-    with pytest.raises(InputError, match="unknown key 'pull' under 'cable\\[0\\]'"):
-        parse_key("cable[0].pull")
+    with pytest.raises(InputError, match="unknown key 'pulley' under 'cable\\[0\\]'"):
+        parse_key("cable[0].pulley")
     with pytest.raises(InputError, match="is not a dotted scene key"):
         parse_key("material..youngs_modulus")
     with pytest.raises(InputError, match="'material' is not an array of tables"):

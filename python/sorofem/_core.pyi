@@ -47,6 +47,8 @@ class _SolveOutput(_Report):
     reactions: _F  # (n_fixed, 3), N
     cable_points: list[_F]  # per cable (k, 3), m
     cable_tensions: list[_F]  # per cable (k - 1,), N
+    tendon_tensions: list[float | None]  # per cable: a tendon's tension, N; None for springs
+    tendon_pulls: list[float | None]  # per cable: a tendon's pull L0 - L, m; None for springs
     contact: _Contact | None  # with obstacles
 
 class _ContactForces(TypedDict):
@@ -75,7 +77,10 @@ class _TrajectoryContact(TypedDict):
 
 class _Cable(TypedDict, total=False):
     points: _F  # (k, 3), m; required
-    stiffness: float  # N/m per segment; required
+    model: str  # "springs" (default) | "tendon"
+    stiffness: float  # N/m per segment; required for springs
+    pull: float  # tendon: pulled length, m (default 0 unless tension is given)
+    tension: float  # tendon: tension, N >= 0 (not with pull)
     actuation: float  # alpha > 0, default 1
     transition: float  # fraction of the segment rest length, default 1e-3
     anchor_first: bool  # default False
@@ -89,6 +94,8 @@ class _Trajectory(TypedDict):
     positions: _F  # (frames, n, 3), m
     velocities: _F  # (n, 3) final, m/s
     cable_points: list[list[_F]]  # per frame, per cable (k, 3)
+    tendon_tensions: list[list[float | None]]  # per frame, per cable: tendon tension, N
+    tendon_pulls: list[list[float | None]]  # per frame, per cable: tendon pull, m
     kinetic_energy: _F  # (frames,), J
     iterations: list[int]  # Newton iterations per step
     factorizations: list[int]  # numeric factorisations per step
@@ -103,6 +110,8 @@ class _ParamGradient(TypedDict, total=False):
     gravity: _F  # (3,)
     cable_actuation: _F  # (n_cables,)
     cable_stiffness: _F  # (n_cables,)
+    cable_pull: _F  # (n_cables,): displacement-controlled tendons
+    cable_tension: _F  # (n_cables,): force-controlled tendons
     mu: _F  # aliases of the original API: material["mu"] (Neo-Hookean)
     lam: _F  # material["lambda"] (Neo-Hookean)
     rho: _F  # density
@@ -329,7 +338,13 @@ class Model:
     def forward(self, direction: dict[str, Any]) -> dict[str, Any]:
         """Forward sensitivity along a parameter direction (any of the adjoint's keys, the
         material's also inside "material"; missing ones are zero):
-        {"dx": (n, 3) m per unit, "dp": (n,) Pa per unit or None}."""
+        {"dx": (n, 3) m per unit, "dp": (n,) Pa per unit or None, "dtension": per cable the
+        tendon's tension change, N per unit, or None for a spring cable}."""
+    def set_tendon_command(self, cable: int, kind: str, value: float) -> None:
+        """Tendon `cable`'s command: kind "pull" (m, shorter than its rest length) or
+        "tension" (N, >= 0)."""
+    def strain_energy(self, positions: _F) -> float:
+        """Strain energy (J) of the body at positions (n, 3): the elastic term alone."""
     def cable_rest_lengths(self) -> list[list[float]]: ...
     def cable_placements(self) -> list[list[tuple[str, int, float]]]:
         """Per cable and point: ("embedded", tet, distance m) | ("free", index, 0.0) | ("anchor", -1, 0.0)."""
@@ -353,7 +368,7 @@ class Model:
         method: str = "modified",
     ) -> _Trajectory:
         """Implicit Euler with lumped mass and Rayleigh damping (alpha_M 1/s, beta_K s);
-        actuation (steps, n_cables) alphas per step; Newton settings per step as for solve
-        (load_steps and max_cutbacks do not apply); method "modified", "newton" or
-        "linearly_implicit". Raises ConvergenceError when a step fails even after halving it
-        six times."""
+        actuation (steps, n_cables) per step: alphas (springs), pulls or tensions (tendons);
+        Newton settings per step as for solve (load_steps and max_cutbacks do not apply); method
+        "modified", "newton" or "linearly_implicit". Raises ConvergenceError when a step fails
+        even after halving it six times."""

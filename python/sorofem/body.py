@@ -13,8 +13,9 @@ Examples
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -23,13 +24,15 @@ from ._extension import core
 from ._validate import (
     as_finite, as_index_array, check_memory, choice, describe, positive_scalar, real, vector_per_node,
 )
-from .cables import Cable, CablePlacement, cable_index, check_actuation
+from .cables import Cable, CablePlacement, cable_index, check_actuation, check_pull, check_tension
 from .errors import InputError, ParameterError
 from .materials import Material
 from .mesh import Mesh
 from .obstacles import Obstacle
 
-__all__ = ["Body", "ObstaclePlacement", "FORMULATIONS", "VOLUMETRIC_MEASURES", "PRESSURE_MASSES"]
+__all__ = [
+    "Body", "ObstaclePlacement", "FORMULATIONS", "VOLUMETRIC_MEASURES", "PRESSURE_MASSES", "set_cable_values",
+]
 
 #: A lower bound of the bytes a model holds per node (sparse Hessian, its factorisation,
 #: per-element data; measured 13-31 kB for the standard and 24 kB and up for the mixed
@@ -151,7 +154,9 @@ class Body:
         self._prescribed = np.zeros((0, 3), dtype=np.float64)
         self._forces = np.zeros((mesh.n_nodes, 3), dtype=np.float64)
         self._cables: list[Cable] = []
-        self._actuations: list[float] = []
+        # Per cable its command: ("actuation", alpha) for a spring chain, ("pull", m) or
+        # ("tension", N) for a tendon; and a spring chain's segment stiffness (NaN for a tendon).
+        self._commands: list[tuple[str, float]] = []
         self._stiffnesses: list[float] = []
         self._obstacles: list[ObstaclePlacement] = []
         self._contact: dict[str, float | None] = dict.fromkeys(CONTACT_SETTINGS)
@@ -267,7 +272,7 @@ class Body:
         other._prescribed = self._prescribed.copy()
         other._forces = self._forces.copy()
         other._cables = list(self._cables)
-        other._actuations = list(self._actuations)
+        other._commands = list(self._commands)
         other._stiffnesses = list(self._stiffnesses)
         other._obstacles = list(self._obstacles)
         other._contact = dict(self._contact)
@@ -351,22 +356,75 @@ class Body:
         if any(c is cable for c in self._cables):
             raise InputError("cable: this Cable has already been added to the body")
         self._cables.append(cable)
-        self._actuations.append(cable.actuation)
-        self._stiffnesses.append(cable.stiffness)
+        self._commands.append(cable.command)
+        self._stiffnesses.append(math.nan if cable.is_tendon else float(cable.stiffness))  # type: ignore[arg-type]
         return len(self._cables) - 1
 
-    def set_actuation(self, cable: Cable | int, alpha: float) -> None:
-        """Set the actuation alpha (> 0; 1 = rest length, < 1 = pulled) of a cable, given as
-        the :class:`sorofem.Cable` or its index. Takes effect at the next solve without
-        rebuilding the model."""
+    def _spring_index(self, cable: Cable | int, what: str) -> int:
         index = cable_index(self, cable)
-        self._actuations[index] = check_actuation(alpha, "alpha")
+        if self._cables[index].is_tendon:
+            raise InputError(
+                f"cable: cable {index} is a tendon, which has no {what}: drive it with body.pull(cable, "
+                "displacement=...) or body.pull(cable, tension=...)"
+            )
+        return index
+
+    def set_actuation(self, cable: Cable | int, alpha: float) -> None:
+        """Set the actuation alpha (> 0; 1 = rest length, < 1 = pulled) of a spring cable,
+        given as the :class:`sorofem.Cable` or its index. Takes effect at the next solve
+        without rebuilding the model. (A tendon is driven by :meth:`pull`.)"""
+        index = self._spring_index(cable, "actuation alpha")
+        self._commands[index] = ("actuation", check_actuation(alpha, "alpha"))
+
+    def pull(self, cable: Cable | int, displacement: float | None = None, *, tension: float | None = None) -> None:
+        """Drive a tendon (a :class:`sorofem.Cable` with ``model="tendon"``, or its index) as a
+        motor does: by the pulled length ``displacement`` (m; the tendon is held at
+        ``L <= L0 - displacement``, exactly: taut with the tension that takes, or slack;
+        negative pays it out) or by its ``tension`` (N, >= 0). Exactly one of the two. Takes
+        effect at the next solve without rebuilding the model; a solve warm-started from the
+        previous one also starts from its tension.
+
+        Raises
+        ------
+        InputError
+            The cable is a spring chain (use :meth:`set_actuation`), or neither or both
+            commands are given.
+        ParameterError
+            A non-finite pull or one not shorter than the tendon's rest length; a negative
+            tension.
+
+        Examples
+        --------
+        >>> import sorofem as sf
+        >>> mesh = sf.Mesh.box(size=(0.4, 0.1, 0.1), cells=(8, 2, 2))
+        >>> body = sf.Body(mesh, sf.NeoHookean(youngs_modulus=66e3, poisson_ratio=0.45))
+        >>> body.fix(mesh.nodes_on_plane((0, 0, 0), (1, 0, 0)))
+        >>> tendon = sf.Cable.line((0.01, 0.05, 0.09), (1, 0, 0), 0.38, 8, model="tendon")
+        >>> body.add_cable(tendon)
+        0
+        >>> body.pull(tendon, displacement=0.01)
+        >>> result = sf.solve_static(body)
+        >>> round(result.cable_pull[0], 9), result.cable_tension[0] > 0
+        (0.01, True)
+        """
+        index = cable_index(self, cable)
+        if not self._cables[index].is_tendon:
+            raise InputError(
+                f"cable: cable {index} is a spring chain: set its actuation alpha with body.set_actuation(); "
+                "body.pull() drives tendons (sorofem.Cable(..., model=\"tendon\"))"
+            )
+        if (displacement is None) == (tension is None):
+            raise InputError("pull: expected exactly one of displacement (m) and tension (N)")
+        if displacement is not None:
+            self._commands[index] = ("pull", check_pull(displacement, "displacement", self._cables[index].length))
+        else:
+            self._commands[index] = ("tension", check_tension(tension))
 
     def set_cable_stiffness(self, cable: Cable | int, stiffness: float) -> None:
-        """Set the segment stiffness (N/m, > 0) of a cable of this body, given as the
+        """Set the segment stiffness (N/m, > 0) of a spring cable of this body, given as the
         :class:`sorofem.Cable` or its index (the :class:`~sorofem.Cable` object keeps its own
         ``stiffness``). Takes effect at the next solve without rebuilding the model."""
-        index = cable_index(self, cable)
+        index = self._spring_index(cable, "stiffness")
         self._stiffnesses[index] = positive_scalar(stiffness, "stiffness")
 
     @property
@@ -376,12 +434,20 @@ class Body:
 
     @property
     def actuations(self) -> list[float]:
-        """Current actuation alpha of each cable."""
-        return list(self._actuations)
+        """Current command value of each cable: the actuation alpha of a spring chain, the
+        pull (m) or tension (N) of a tendon (:attr:`commands` says which)."""
+        return [value for _, value in self._commands]
+
+    @property
+    def commands(self) -> list[tuple[str, float]]:
+        """Current command of each cable: ``("actuation", alpha)`` for a spring chain,
+        ``("pull", m)`` or ``("tension", N)`` for a tendon."""
+        return list(self._commands)
 
     @property
     def cable_stiffnesses(self) -> list[float]:
-        """Current segment stiffness of each cable, N/m (see :meth:`set_cable_stiffness`)."""
+        """Current segment stiffness of each cable, N/m (see :meth:`set_cable_stiffness`;
+        NaN for a tendon)."""
         return list(self._stiffnesses)
 
     def cable_placements(self) -> list[list[CablePlacement]]:
@@ -527,9 +593,7 @@ class Body:
         if self._model_contact[0] != contact:
             model.set_contact([o.to_core() for o in self._obstacles], **self._contact)
             self._model_contact[0] = contact
-        for c, (alpha, stiffness) in enumerate(zip(self._actuations, self._stiffnesses)):
-            model.set_actuation(c, alpha)
-            model.set_cable_stiffness(c, stiffness)
+        set_cable_values(model, self._commands, self._stiffnesses)
         return model
 
     #: Old private name of :meth:`core_model` (the benchmarks call it).
@@ -541,8 +605,7 @@ class Body:
             per_node = MODEL_BYTES_PER_NODE.get(self._formulation, max(MODEL_BYTES_PER_NODE.values()))
             check_memory(per_node * self._mesh.n_nodes,
                          f"the {self._formulation} model of a mesh of {self._mesh.n_nodes} nodes", "mesh")
-            cables = [c.to_core(alpha) | {"stiffness": k}
-                      for c, alpha, k in zip(self._cables, self._actuations, self._stiffnesses)]
+            cables = [c.to_core() for c in self._cables]
             self._model = core().Model(
                 self._mesh.points, self._mesh.tets, self._fixed.copy(), self._formulation, self.formulation_options,
                 cables=cables or None,
@@ -562,3 +625,15 @@ class Body:
             f"Body({self._mesh!r}, {self._material!r}, formulation={self._formulation!r}{options}, "
             f"fixed={self._fixed.size} nodes)"
         )
+
+
+def set_cable_values(model: Any, commands: Sequence[tuple[str, float]], stiffnesses: Sequence[float]) -> None:
+    """Give the extension's ``model`` each cable's command (``("actuation", alpha)``,
+    ``("pull", m)`` or ``("tension", N)``, as :attr:`Body.commands`) and each spring chain's
+    stiffness (N/m). Internal interface of :class:`Body` and the inverse problems."""
+    for c, ((kind, value), stiffness) in enumerate(zip(commands, stiffnesses)):
+        if kind == "actuation":
+            model.set_actuation(c, float(value))
+            model.set_cable_stiffness(c, float(stiffness))
+        else:
+            model.set_tendon_command(c, kind, float(value))

@@ -1,6 +1,16 @@
-"""Cables: actuated tendons routed through a body, and quasi-static actuation.
+"""Cables: spring chains and tendons routed through a body.
 
-A cable is an ordered chain of points. Each point is embedded in the tetrahedron that
+A cable is an ordered chain of points, of one of two **models**:
+
+* ``model="springs"`` (the default, the paper's cable): a chain of unilateral springs bonded to
+  the body at every point, driven by a rest-length ratio alpha (below);
+* ``model="tendon"``: an inextensible tendon that slides freely through its points (guide
+  points; the last one is where it is tied), so one tension ``T >= 0`` acts along all of it,
+  driven as a motor drives it: by the pulled length ``d`` (m; the tendon's length is held at
+  ``L <= L0 - d``, taut or slack, exactly) or by the tension ``T`` (N). See
+  :meth:`sorofem.Body.pull` and docs/theory.md.
+
+Each point of either model is embedded in the tetrahedron that
 contains it (it moves with the material, barycentrically), snapped onto the nearest
 tetrahedron if it lies within ``snap_tolerance`` outside the mesh, turned into a free node
 with its own mass (``outside="free"``), or fixed in the world (the first point, with
@@ -14,8 +24,10 @@ spring when it is taut, joined smoothly over a transition of width ``w = transit
             = stiffness (L - alpha l)^2 / 2w 0 <= L - alpha l <= w   (transition)
             = stiffness (L - alpha l - w/2)  L - alpha l >= w        (taut)
 
-A cable pushes nothing: it only pulls its points towards each other. The points are bonded
-to the material (no sliding), so a cable's tension may vary from segment to segment.
+A cable pushes nothing: it only pulls its points towards each other. The points of a spring
+chain are bonded to the material (no sliding), so its tension may vary from segment to
+segment; a tendon's is one number (``result.cable_tension``), and its pulled length
+``L0 - L`` is ``result.cable_pull``.
 
 Examples
 --------
@@ -48,10 +60,14 @@ from ._formats import meshio_write
 from ._validate import MAX_CABLE_DIVISIONS, count, describe, real
 from .errors import InputError, ParameterError, ShapeError
 
-__all__ = ["Cable", "CablePlacement", "OUTSIDE_MODES", "segment_tensions", "write_cables"]
+__all__ = ["Cable", "CablePlacement", "CABLE_MODELS", "OUTSIDE_MODES", "segment_tensions", "write_cables"]
 
 #: What to do with a cable point farther than ``snap_tolerance`` from the mesh.
 OUTSIDE_MODES: tuple[str, ...] = ("error", "free")
+#: How a cable acts: a chain of bonded unilateral springs, or a sliding inextensible tendon.
+CABLE_MODELS: tuple[str, ...] = ("springs", "tendon")
+#: A tendon's commands: pulled length (m) or tension (N).
+TENDON_COMMANDS: tuple[str, ...] = ("pull", "tension")
 
 #: Largest change of alpha per continuation step when :func:`sorofem.actuate` builds the path.
 DEFAULT_ALPHA_STEP = 0.05
@@ -71,40 +87,78 @@ def check_actuation(alpha: Any, name: str = "actuation") -> float:
     return float(alpha)
 
 
+def check_pull(pull: Any, name: str = "pull", rest_length: float | None = None) -> float:
+    """Validate a tendon's pull: a finite length in m (negative pays the tendon out), shorter
+    than its rest length ``rest_length`` when given."""
+    if isinstance(pull, bool) or not isinstance(pull, numbers.Real) or not math.isfinite(float(pull)):
+        raise ParameterError(f"{name}: expected a finite pulled length in m, got {describe(pull)}", name)
+    if rest_length is not None and float(pull) >= rest_length:
+        raise ParameterError(
+            f"{name}: expected a pull shorter than the tendon's rest length {rest_length:.6g} m, got {float(pull):g} m",
+            name,
+        )
+    return float(pull)
+
+
+def check_tension(tension: Any, name: str = "tension") -> float:
+    """Validate a tendon's tension: a finite force >= 0 N (a tendon cannot push)."""
+    if isinstance(tension, bool) or not isinstance(tension, numbers.Real) or not (
+        math.isfinite(float(tension)) and float(tension) >= 0
+    ):
+        raise ParameterError(
+            f"{name}: expected a finite tension >= 0 N (a tendon cannot push), got {describe(tension)}", name
+        )
+    return float(tension)
+
+
 class Cable:
-    """A cable: a chain of unilateral springs through (or outside) a body.
+    """A cable: a chain of unilateral springs, or a sliding tendon, through (or outside) a body.
 
     Parameters
     ----------
     points
         Rest positions of the cable points, ``(k, 3)`` with ``k >= 2``, m; consecutive
-        points must differ.
+        points must differ. A tendon's last point is where it is tied.
     stiffness
-        Stiffness of each segment spring, N/m, > 0. (Each segment is a spring of this
-        stiffness whatever its length: a finer division makes the whole cable softer.)
+        Spring chains (required): stiffness of each segment spring, N/m, > 0. (Each segment is
+        a spring of this stiffness whatever its length: a finer division makes the whole
+        cable softer.) Tendons have none.
     actuation
-        Initial actuation alpha > 0: the segments' rest lengths are multiplied by it
-        (1: rest, 0.8: pulled in by 20 %). Change it later with :meth:`Body.set_actuation`.
+        Spring chains: initial actuation alpha > 0: the segments' rest lengths are multiplied
+        by it (1: rest, 0.8: pulled in by 20 %). Change it later with
+        :meth:`Body.set_actuation`.
+    model
+        ``"springs"`` (default) or ``"tendon"`` (see the module docstring and
+        :data:`CABLE_MODELS`).
+    pull
+        Tendons: initial pulled length, m (the tendon's length is held at ``L <= L0 - pull``;
+        negative pays it out), shorter than the rest length. Default 0 when ``tension`` is
+        not given: the motor holds the tendon at its rest length.
+    tension
+        Tendons: initial tension, N, >= 0 (force control) instead of a pull. Change either
+        later with :meth:`Body.pull`.
     transition
         Width of the slack-to-taut transition as a fraction of each segment's rest length,
         in (0, 1); smaller is closer to an ideal unilateral spring, larger is easier for
         Newton.
     anchor_first
         Fix the first point in the world (the motor) instead of embedding it; the cable then
-        exerts an external force on the body.
+        exerts an external force on the body (a tendon runs from the motor through its guide
+        points).
     snap_tolerance
         Points at most this far outside the mesh (m, >= 0) are attached to the nearest
         tetrahedron.
     outside
-        ``"error"`` (default): a point farther outside is an error. ``"free"``: it becomes a
-        free node with its own three unknowns, mass ``free_node_mass`` and weight.
+        ``"error"`` (default): a point farther outside is an error. ``"free"`` (spring chains
+        only): it becomes a free node with its own three unknowns, mass ``free_node_mass``
+        and weight.
     free_node_mass
         Mass of each free node, kg, >= 0. A massless free node needs a taut cable on both
         sides to be determined.
     damping
         Dashpot coefficient of each segment, N s/m, >= 0: in :func:`sorofem.simulate` a force
         ``damping * dL/dt`` along each segment opposes the change of its length ``L`` (the
-        cable's internal friction); static solves are unaffected.
+        cable's internal friction); static solves are unaffected. Spring chains only.
 
     Raises
     ------
@@ -119,14 +173,20 @@ class Cable:
     >>> cable = sf.Cable([[0, 0, 0], [0.1, 0, 0], [0.2, 0, 0]], stiffness=1e4)
     >>> cable.n_segments, cable.rest_lengths.tolist()
     (2, [0.1, 0.1])
+    >>> tendon = sf.Cable([[0, 0, 0], [0.1, 0, 0], [0.2, 0, 0]], model="tendon", pull=0.01)
+    >>> tendon.command
+    ('pull', 0.01)
     """
 
     def __init__(
         self,
         points: ArrayLike,
-        stiffness: float,
+        stiffness: float | None = None,
         actuation: float = 1.0,
         *,
+        model: str = "springs",
+        pull: float | None = None,
+        tension: float | None = None,
         transition: float = 1e-3,
         anchor_first: bool = False,
         snap_tolerance: float = 0.0,
@@ -156,11 +216,34 @@ class Cable:
             raise ParameterError(f"anchor_first: expected True or False, got {describe(anchor_first)}", "anchor_first")
         if not isinstance(outside, str) or outside not in OUTSIDE_MODES:
             raise ParameterError(f"outside: expected one of {list(OUTSIDE_MODES)}, got {outside!r}", "outside")
+        if not isinstance(model, str) or model not in CABLE_MODELS:
+            raise ParameterError(f"model: expected one of {list(CABLE_MODELS)}, got {describe(model)}", "model")
         pts.setflags(write=False)
         lengths.setflags(write=False)
         self._points = pts
         self._rest_lengths = lengths
-        self.stiffness = real(stiffness, "stiffness", minimum=0.0, strict=True)
+        self.model = model
+        if model == "tendon":
+            self._check_tendon_options(stiffness, actuation, transition, outside, free_node_mass, damping)
+            if pull is not None and tension is not None:
+                raise ParameterError("pull, tension: a tendon takes either a pull or a tension, not both", "pull")
+            #: A tendon's initial command: ``("pull", m)`` or ``("tension", N)``.
+            self.command = (
+                ("tension", check_tension(tension)) if tension is not None
+                else ("pull", check_pull(0.0 if pull is None else pull, rest_length=float(lengths.sum())))
+            )
+            self.stiffness: float | None = None
+        else:
+            for name, value in (("pull", pull), ("tension", tension)):
+                if value is not None:
+                    raise ParameterError(
+                        f"{name}: only a tendon (model=\"tendon\") takes a {name}; a spring chain is driven by its "
+                        "actuation alpha", name,
+                    )
+            if stiffness is None:
+                raise ParameterError("stiffness: a spring chain needs the stiffness of its segments, N/m", "stiffness")
+            self.stiffness = real(stiffness, "stiffness", minimum=0.0, strict=True)
+            self.command = ("actuation", check_actuation(actuation))
         self.actuation = check_actuation(actuation)
         self.transition = real(transition, "transition", minimum=0.0, strict=True, maximum=1.0)
         self.anchor_first = bool(anchor_first)
@@ -169,6 +252,25 @@ class Cable:
         self.free_node_mass = real(free_node_mass, "free_node_mass", minimum=0.0, strict=False)
         self.damping = real(damping, "damping", minimum=0.0, strict=False)
 
+    @staticmethod
+    def _check_tendon_options(
+        stiffness: Any, actuation: Any, transition: Any, outside: Any, free_node_mass: Any, damping: Any
+    ) -> None:
+        """A tendon has none of a spring chain's options (a clear error rather than an ignored value)."""
+        given = {"stiffness": stiffness is not None, "actuation": actuation != 1.0, "transition": transition != 1e-3,
+                 "free_node_mass": free_node_mass != 0.0, "damping": damping != 0.0}
+        for name, set_ in given.items():
+            if set_:
+                raise ParameterError(
+                    f"{name}: a tendon (model=\"tendon\") has no {name}; it is inextensible and driven by its pull "
+                    "(m) or tension (N)", name,
+                )
+        if outside == "free":
+            raise ParameterError(
+                "outside: a tendon's guide points must lie in the body (or be the anchor): \"free\" is for spring "
+                "chains; a free guide point would have no stiffness along the tendon", "outside",
+            )
+
     @classmethod
     def line(
         cls,
@@ -176,7 +278,7 @@ class Cable:
         direction: ArrayLike,
         length: float,
         divisions: int,
-        stiffness: float,
+        stiffness: float | None = None,
         actuation: float = 1.0,
         **options: Any,
     ) -> "Cable":
@@ -201,6 +303,8 @@ class Cable:
         >>> cable = sf.Cable.line((0, 0.05, 0.01), (1, 0, 0), length=0.4, divisions=10, stiffness=1e5)
         >>> cable.points.shape, round(float(cable.rest_lengths[0]), 6)
         ((11, 3), 0.04)
+        >>> sf.Cable.line((0, 0.05, 0.01), (1, 0, 0), 0.4, 10, model="tendon", tension=2.0).command
+        ('tension', 2.0)
         """
         try:
             p0 = np.asarray(start, dtype=np.float64)
@@ -242,8 +346,23 @@ class Cable:
         """Total rest length, m."""
         return float(self._rest_lengths.sum())
 
+    @property
+    def is_tendon(self) -> bool:
+        return self.model == "tendon"
+
     def to_core(self, actuation: float | None = None) -> dict[str, Any]:
-        """The dict the extension's ``Model(cables=[...])`` takes."""
+        """The dict the extension's ``Model(cables=[...])`` takes (a tendon's command as given
+        at construction; :meth:`sorofem.Body.core_model` sets the current one)."""
+        if self.is_tendon:
+            kind, value = self.command
+            return {
+                "points": np.ascontiguousarray(self._points),
+                "model": "tendon",
+                kind: value,
+                "anchor_first": self.anchor_first,
+                "snap_tolerance": self.snap_tolerance,
+                "outside": self.outside,
+            }
         return {
             "points": np.ascontiguousarray(self._points),
             "stiffness": self.stiffness,
@@ -261,11 +380,15 @@ class Cable:
         data = self.to_core()
         data["points"] = self._points.tolist()
         data["length"] = self.length
+        data["model"] = self.model
         return data
 
     def __repr__(self) -> str:
         extra = ", anchor_first=True" if self.anchor_first else ""
         extra += f", outside={self.outside!r}" if self.outside != "error" else ""
+        if self.is_tendon:
+            kind, value = self.command
+            return f"Cable({self.n_points} points, length={self.length:.4g} m, model='tendon', {kind}={value:g}{extra})"
         return (
             f"Cable({self.n_points} points, length={self.length:.4g} m, stiffness={self.stiffness:.4g} N/m, "
             f"actuation={self.actuation:g}{extra})"

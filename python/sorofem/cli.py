@@ -25,7 +25,8 @@ deformed body); ``deformed.vtu`` the same data on the deformed mesh.
 and for ``kind = "mixed"`` the pressure range ``min_pressure``/``max_pressure`` (Pa); the
 pressure field itself is the point data ``pressure`` of ``result.vtu``. With ``[[cable]]``
 entries, ``run`` also writes ``DIR/cables.vtu`` (the cables as lines, with tension) and
-``summary.json`` gets ``cables``: per cable its actuation, segment tensions and where each point
+``summary.json`` gets ``cables``: per cable its model and command (alpha, or a tendon's pull or
+tension), its tension (a tendon's one number) and pull ``L0 - L``, segment tensions and where each point
 was placed. A scene with ``[dynamics]`` is integrated in time instead: ``run`` writes
 ``DIR/trajectory.pvd`` with the frames in ``DIR/trajectory/``, ``DIR/trajectory.png`` (displacement
 and kinetic energy against time) and ``DIR/summary.json`` (steps, Newton iterations, cutbacks,
@@ -451,7 +452,12 @@ def _run_static(args: argparse.Namespace, scene: Any, run: RunFolder, base: dict
         if result.pressure is not None:
             print(f"pressure {result.pressure.min():.4g} .. {result.pressure.max():.4g} Pa")
         for c, tension in enumerate(result.cable_tensions):
-            print(f"cable {c}: alpha {result.actuations[c]:g}, tension {tension.min():.4g} .. {tension.max():.4g} N")
+            kind, value = result.commands[c]
+            if kind == "actuation":
+                print(f"cable {c}: alpha {value:g}, tension {tension.min():.4g} .. {tension.max():.4g} N")
+            else:
+                print(f"cable {c} (tendon, {kind} {value:g} {'m' if kind == 'pull' else 'N'}): tension "
+                      f"{result.cable_tension[c]:.6g} N, pull {result.cable_pull[c]:.6g} m")
         print(_wrote(outputs, run.folder))
     return EXIT_OK
 
@@ -613,6 +619,7 @@ def _inverse_run(args: argparse.Namespace, scene: Any, section: dict[str, Any], 
         ok, result, fitted = ctl.reachable, ctl.result, ctl
         lines = [
             f"{scene.path.name}: actuation {', '.join(f'{a:.6g}' for a in ctl.actuation)} "
+            f"({', '.join(_COMMAND_WORDS[scene.body.commands[c][0]] for c in section['cables'])}) "
             f"of cable(s) {section['cables']} ({section['method']})",
             f"distance {ctl.distance:.3e} m (rms), max {ctl.max_distance:.3e} m, "
             f"{'reachable' if ctl.reachable else 'NOT reachable'}, {ctl.forward_solves} forward solves",
@@ -640,6 +647,10 @@ def _inverse_run(args: argparse.Namespace, scene: Any, section: dict[str, Any], 
         print(f"error: {_one_line(Exception(failure))}{_report_in(outputs)}", file=sys.stderr)
         return EXIT_SOLVER
     return EXIT_OK
+
+
+#: How the command of each cable kind reads in a summary line.
+_COMMAND_WORDS = {"actuation": "alpha", "pull": "pull, m", "tension": "tension, N"}
 
 
 def _solve_inverse(command: str, scene: Any, section: dict[str, Any], options: Any, history: Path | None,

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import numbers
 import os
-import re
 import time
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
@@ -38,6 +37,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._chunks import Joined, shift_step_in_message
 from ._deprecated import moved
 from ._text import plural
 from ._validate import (
@@ -51,7 +51,7 @@ from ._validate import (
     positive_scalar,
 )
 from ._pvd import PvdWriter
-from .body import Body
+from .body import Body, set_cable_values
 from .cables import attached_rest_lengths, cable_index, segment_tensions
 from .errors import ConvergenceError, InputError, Interrupted, ParameterError, ShapeError
 from .progress import Progress
@@ -147,7 +147,9 @@ def evaluate_schedule(
     * a dict ``{cable or index: entry}``; cables not named hold their actuation;
     * an array ``(steps, n_cables)``.
 
-    Step ``s`` is evaluated at ``t = (s + 1) dt``. Every alpha must be finite and > 0.
+    Step ``s`` is evaluated at ``t = (s + 1) dt``. Every alpha must be finite and > 0. A
+    tendon's entries are its command (:attr:`sorofem.Body.commands`): its pull (m, shorter than
+    its rest length) or its tension (N, >= 0).
 
     Examples
     --------
@@ -199,13 +201,22 @@ def evaluate_schedule(
             out[:, c] = _alpha_column(entry, times, current[c], f"actuation[{c}]")
     else:
         raise InputError(f"actuation: expected None, a callable, a sequence or a dict, got {describe(schedule)}")
-    bad = ~(np.isfinite(out) & (out > 0))
-    if np.any(bad):
-        s, c = (int(i) for i in np.argwhere(bad)[0])
-        raise ParameterError(
-            f"actuation: alphas must be finite and > 0, got {out[s, c]} for cable {c} at step {s} (t = {times[s]:g} s)",
-            "actuation",
-        )
+    for c, (kind, _) in enumerate(body.commands):
+        column = out[:, c]
+        if kind == "actuation":
+            bad, expected = ~(np.isfinite(column) & (column > 0)), "alphas must be finite and > 0"
+        elif kind == "pull":
+            length = body.cables[c].length
+            bad = ~(np.isfinite(column) & (column < length))
+            expected = f"pulls must be finite and shorter than the tendon's rest length {length:.6g} m"
+        else:
+            bad, expected = ~(np.isfinite(column) & (column >= 0)), "tensions must be finite and >= 0 N"
+        if np.any(bad):
+            s = int(np.argwhere(bad)[0, 0])
+            raise ParameterError(
+                f"actuation: {expected}, got {out[s, c]} for cable {c} at step {s} (t = {times[s]:g} s)",
+                "actuation",
+            )
     return np.ascontiguousarray(out)
 
 
@@ -237,8 +248,11 @@ class Trajectory:
         How many time steps were split because Newton failed.
     cable_points
         Per frame, one ``(k, 3)`` array per cable, m.
+    cable_tension, cable_pull
+        Per frame, per cable: a tendon's tension (N) and pulled length ``L0 - L`` (m);
+        ``None`` for a spring chain.
     actuation
-        The alphas used, ``(steps, n_cables)``.
+        The commands used, ``(steps, n_cables)``: alphas (pulls or tensions for tendons).
     timings
         ``{"simulate": s}``: wall-clock time of the integration.
     contact_forces
@@ -270,6 +284,8 @@ class Trajectory:
         self.residuals = np.asarray(out["residuals"], dtype=np.float64)
         self.cutbacks = int(out.get("cutbacks", 0))
         self.cable_points = [[np.asarray(p, dtype=np.float64) for p in frame] for frame in out.get("cable_points", [])]
+        self.cable_tension: list[list[float | None]] = [list(frame) for frame in out.get("tendon_tensions", [])]
+        self.cable_pull: list[list[float | None]] = [list(frame) for frame in out.get("tendon_pulls", [])]
         self.actuation = actuation
         #: The cables' alphas before the first step, ``(n_cables,)``.
         self.initial_actuation = np.asarray(body.actuations, dtype=np.float64)
@@ -305,12 +321,15 @@ class Trajectory:
 
     def cable_tensions(self, frame: int = -1) -> list[NDArray[np.float64]]:
         """Tension of every segment at a saved frame, one ``(k - 1,)`` array per cable (N),
-        from the frame's cable points and the alphas of the step that produced it."""
+        from the frame's cable points and the alphas of the step that produced it (a
+        tendon's segments all carry its tension, :attr:`cable_tension`)."""
         frame = range(self.n_frames)[frame]
         step = int(round(self.times[frame] / self.dt)) - 1
         alphas = self.actuation[step] if step >= 0 else self.initial_actuation
         return [
-            segment_tensions(cable, self.cable_points[frame][c], float(alphas[c]), attached_rest_lengths(self.body, c))
+            np.full(cable.n_segments, float(self.cable_tension[frame][c] or 0.0)) if cable.is_tendon
+            else segment_tensions(cable, self.cable_points[frame][c], float(alphas[c]),
+                                  attached_rest_lengths(self.body, c))
             for c, cable in enumerate(self.body.cables)
         ]
 
@@ -528,7 +547,7 @@ def simulate(
         )
 
     bar = Progress(total=steps, desc="simulate", unit="steps", enabled=progress)
-    joined = _Joined()
+    joined = Joined()
     try:
         if (not (bar.active or on_frames is not None) or _has_free_cable_nodes(body)
                 or any(o.path is not None for o in body.obstacles)):
@@ -554,9 +573,8 @@ def simulate(
         ) from None
     finally:
         bar.close()
-        # The extension leaves the last step's alphas in the model; the body's own stay in charge.
-        for c, alpha in enumerate(body.actuations):
-            model.set_actuation(c, alpha)
+        # The extension leaves the last step's commands in the model; the body's own stay in charge.
+        set_cable_values(model, body.commands, body.cable_stiffnesses)
     return Trajectory(body, dt, out, alphas, time.perf_counter() - start)
 
 
@@ -581,48 +599,11 @@ def _postfix(t: float, per_step: float, cutbacks: int) -> str:
 
 #: Wall-clock target of one chunk of steps while a progress line is shown, s.
 CHUNK_SECONDS = 0.2
-_STEP_IN_MESSAGE = re.compile(r"time step (\d+) \(t = ([0-9.eE+-]+) s\)")
-
-
-class _Joined:
-    """The outputs of the chunks integrated so far, joined as one call would return them."""
-
-    def __init__(self) -> None:
-        self.times: list[NDArray[np.float64]] = []
-        self.positions: list[NDArray[np.float64]] = []
-        self.kinetic_energy: list[NDArray[np.float64]] = []
-        self.cable_points: list[Any] = []
-        self.iterations: list[NDArray[np.int64]] = []
-        self.factorizations: list[NDArray[np.int64]] = []
-        self.residuals: list[NDArray[np.float64]] = []
-        self.contact: list[dict[str, Any]] = []
-        self.cutbacks = 0
-        self.velocities: Any = None
-        #: Steps integrated.
-        self.done = 0
-
-    def output(self) -> dict[str, Any]:
-        return {
-            "times": np.concatenate(self.times),
-            "positions": np.concatenate(self.positions),
-            "velocities": self.velocities,
-            "kinetic_energy": np.concatenate(self.kinetic_energy),
-            "cable_points": self.cable_points,
-            "iterations": np.concatenate(self.iterations),
-            "factorizations": np.concatenate(self.factorizations),
-            "residuals": np.concatenate(self.residuals),
-            "cutbacks": self.cutbacks,
-            "contact": None if not self.contact else {
-                key: (np.concatenate([c[key] for c in self.contact]) if key != "iterate_min_distances"
-                      else [d for c in self.contact for d in c[key]])
-                for key in self.contact[0]
-            },
-        }
 
 
 def _run_in_chunks(
     run: Callable[..., dict[str, Any]], steps: int, save_every: int, alphas: NDArray[np.float64],
-    x0: Any, v0: Any, dt: float, bar: Progress, joined: _Joined,
+    x0: Any, v0: Any, dt: float, bar: Progress, joined: Joined,
     on_frames: Callable[..., None] | None = None,
 ) -> dict[str, Any]:
     """Integrate ``steps`` steps as consecutive calls of ``run`` (each continuing from the
@@ -652,7 +633,7 @@ def _run_in_chunks(
         try:
             out = run(n, alphas[done:end], x, v, every)
         except ConvergenceError as err:
-            _shift_step_in_message(err, done, t_offset)
+            shift_step_in_message(err, done, t_offset)
             raise
         check_finite_solution(out, None, "the time integration")
         per_step = (time.perf_counter() - tick) / n
@@ -667,6 +648,8 @@ def _run_in_chunks(
         joined.positions.append(new_positions)
         joined.kinetic_energy.append(np.asarray(out["kinetic_energy"], dtype=np.float64)[keep])
         joined.cable_points.extend(new_cables)
+        joined.tendon_tensions.extend(list(out.get("tendon_tensions", []))[keep])
+        joined.tendon_pulls.extend(list(out.get("tendon_pulls", []))[keep])
         if out.get("contact") is not None:
             joined.contact.append(out["contact"] | {
                 key: np.asarray(out["contact"][key])[keep]
@@ -686,18 +669,6 @@ def _run_in_chunks(
         bar.set(end, postfix=_postfix(t_offset, float(iterations.mean()), joined.cutbacks))
         size = max(1, int(CHUNK_SECONDS / max(per_step, 1e-9)))
     return joined.output()
-
-
-def _shift_step_in_message(err: ConvergenceError, first_step: int, t_offset: float) -> None:
-    """A chunk's error counts steps and time from the chunk's start: make them global."""
-
-    def shift(match: re.Match[str]) -> str:
-        return f"time step {int(match[1]) + first_step} (t = {float(match[2]) + t_offset:.4f} s)"
-
-    if err.args and isinstance(err.args[0], str):
-        err.args = (_STEP_IN_MESSAGE.sub(shift, err.args[0]), *err.args[1:])
-    if isinstance(err.report, dict) and isinstance(err.report.get("message"), str):
-        err.report["message"] = _STEP_IN_MESSAGE.sub(shift, err.report["message"])
 
 
 def _has_dynamics() -> bool:

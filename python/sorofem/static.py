@@ -27,7 +27,16 @@ from numpy.typing import ArrayLike, NDArray
 from ._text import plural
 from ._validate import MAX_LOAD_STEPS, MAX_MAGNITUDE, as_finite, describe, real
 from .body import Body
-from .cables import DEFAULT_ALPHA_STEP, MAX_HALVINGS, Cable, cable_index, check_actuation, placement_counts
+from .cables import (
+    DEFAULT_ALPHA_STEP,
+    MAX_HALVINGS,
+    Cable,
+    cable_index,
+    check_actuation,
+    check_pull,
+    check_tension,
+    placement_counts,
+)
 from .errors import ConvergenceError, InputError, ParameterError, SolverError
 from .io import result_mesh
 from .progress import Progress
@@ -77,7 +86,8 @@ def check_magnitudes(body: Body, gravity: ArrayLike) -> None:
             stiffness = max(stiffness, scale)
             if not scale <= MAX_MAGNITUDE:
                 refuse(name, "the modulus times the mesh size (N)", scale)
-    for k in body.cable_stiffnesses:
+    # A tendon has no stiffness (its entry is NaN): it is inextensible.
+    for k in (k for k, cable in zip(body.cable_stiffnesses, body.cables) if not cable.is_tendon):
         stiffness = max(stiffness, k * size)
         if not k * size <= MAX_MAGNITUDE:
             refuse("stiffness", "a cable's stiffness times the mesh size (N)", k * size)
@@ -218,6 +228,8 @@ class StaticResult:
         cable_points: Sequence[ArrayLike] | None = None,
         cable_tensions: Sequence[ArrayLike] | None = None,
         element_fields: Mapping[str, ArrayLike] | None = None,
+        tendon_tensions: Sequence[float | None] | None = None,
+        tendon_pulls: Sequence[float | None] | None = None,
         contact: Mapping[str, Any] | None = None,
     ) -> None:
         self.body = body
@@ -225,10 +237,23 @@ class StaticResult:
         self.contact = None if contact is None else ContactState(contact)
         #: Current position of every cable point, one ``(k, 3)`` array per cable (m).
         self.cable_points = [np.asarray(p, dtype=np.float64).reshape(-1, 3) for p in cable_points or []]
-        #: Tension of every cable segment, one ``(k - 1,)`` array per cable (N, >= 0).
+        #: Tension of every cable segment, one ``(k - 1,)`` array per cable (N, >= 0; a tendon's
+        #: segments all carry its one tension).
         self.cable_tensions = [np.asarray(t, dtype=np.float64).reshape(-1) for t in cable_tensions or []]
-        #: The actuation alpha of each cable at this solve.
+        #: Per cable, a tendon's tension (N, >= 0; whichever its command) or ``None`` for a spring
+        #: chain (whose tension varies along it: :attr:`cable_tensions`).
+        self.cable_tension: list[float | None] = [None if t is None else float(t) for t in tendon_tensions or []]
+        #: Per cable, the pulled length ``L0 - L`` (m): rest length minus current length along the
+        #: points (a tendon's, whichever its command; a spring chain's between its attached points).
+        self.cable_pull: list[float] = [
+            float(p) if p is not None else float(body.attached_rest_lengths(c).sum() - _polyline_length(points))
+            for c, (p, points) in enumerate(zip(tendon_pulls or [None] * len(self.cable_points), self.cable_points))
+        ]
+        #: The command value of each cable at this solve: alpha, pull (m) or tension (N), as
+        #: :attr:`commands` says.
         self.actuations = body.actuations
+        #: The command of each cable at this solve (see :attr:`sorofem.Body.commands`).
+        self.commands = body.commands
         #: The segment stiffness of each cable at this solve, N/m.
         self.stiffnesses = body.cable_stiffnesses
         #: Support reactions ``(n_fixed, 3)`` in N, one row per entry of ``body.fixed_nodes``:
@@ -393,8 +418,12 @@ class StaticResult:
         return {
             "cables": [
                 {
+                    "model": cable.model,
+                    "command": list(self.commands[c]),
                     "actuation": alpha,
-                    "stiffness": stiffness,
+                    "stiffness": None if cable.is_tendon else stiffness,
+                    "tension": self.cable_tension[c] if c < len(self.cable_tension) else None,
+                    "pull": self.cable_pull[c] if c < len(self.cable_pull) else None,
                     "rest_length": cable.length,
                     "tensions": self.cable_tensions[c].tolist() if c < len(self.cable_tensions) else None,
                     "max_tension": float(self.cable_tensions[c].max()) if c < len(self.cable_tensions) else None,
@@ -503,8 +532,13 @@ def solve_static(
     return StaticResult(
         body, positions, out.get("pressure"), report, reactions=out.get("reactions"),
         cable_points=out.get("cable_points"), cable_tensions=out.get("cable_tensions"),
-        element_fields=fields, contact=out.get("contact"),
+        element_fields=fields, tendon_tensions=out.get("tendon_tensions"),
+        tendon_pulls=out.get("tendon_pulls"), contact=out.get("contact"),
     )
+
+
+def _polyline_length(points: NDArray[np.float64]) -> float:
+    return float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
 
 
 def actuate(
@@ -513,12 +547,14 @@ def actuate(
     alphas: float | Sequence[float],
     gravity: ArrayLike = (0.0, 0.0, 0.0),
     *,
-    max_step: float = DEFAULT_ALPHA_STEP,
+    max_step: float | None = None,
     initial: ArrayLike | StaticResult | None = None,
     tolerance: float = 1e-8,
     max_iterations: int = 50,
 ) -> list[StaticResult]:
-    """Pull (or release) a cable quasi-statically by continuation in its actuation alpha.
+    """Pull (or release) a cable quasi-statically by continuation in its command: the
+    actuation alpha of a spring chain, the pull (m) or tension (N) of a tendon (whichever it
+    is driven by, :attr:`Body.commands`).
 
     Each alpha of the path is solved with :func:`sorofem.solve_static`, warm-started from the
     previous equilibrium. A step that does not converge is halved (up to
@@ -531,12 +567,14 @@ def actuate(
     cable
         A :class:`Cable` of the body or its index.
     alphas
-        The path: a sequence of alphas solved in turn, or a single target alpha, reached in
-        equal steps of at most ``max_step`` from the cable's current actuation.
+        The path: a sequence of commands (alphas, pulls or tensions) solved in turn, or a
+        single target, reached in equal steps of at most ``max_step`` from the cable's current
+        command.
     gravity
         ``(3,)``, m/s^2.
     max_step
-        Largest alpha increment of a path built from a single target.
+        Largest increment of a path built from a single target: default 0.05 in alpha, 5 % of
+        a tendon's rest length in pull, and the whole way in tension.
     initial
         Starting positions ``(n_nodes, 3)`` or a :class:`StaticResult` for the first solve
         (default: the rest shape).
@@ -558,25 +596,42 @@ def actuate(
     --------
     >>> results = sf.actuate(body, cable, 0.5, gravity=(0, 0, -9.81))  # doctest: +SKIP
     >>> results[-1].cable_tensions[0]                                  # doctest: +SKIP
+    >>> results = sf.actuate(body, tendon, 0.02)  # pull a tendon 2 cm in 5 % steps  # doctest: +SKIP
     """
     index = cable_index(body, cable)
+    kind = body.commands[index][0]
+    check = {"actuation": check_actuation, "tension": check_tension,
+             "pull": lambda v, name: check_pull(v, name, body.cables[index].length)}[kind]
     if isinstance(alphas, numbers.Real) and not isinstance(alphas, bool):
-        target = check_actuation(alphas, "alphas")
-        step = real(max_step, "max_step", minimum=0.0, strict=True)
+        target = check(alphas, "alphas")
         start = body.actuations[index]
+        if max_step is None:
+            default = {"actuation": DEFAULT_ALPHA_STEP, "pull": 0.05 * body.cables[index].length,
+                       "tension": math.inf}[kind]
+            step = default if math.isfinite(default) else max(abs(target - start), 1.0)
+        else:
+            step = real(max_step, "max_step", minimum=0.0, strict=True)
         solves = abs(target - start) / step
         if not solves <= MAX_LOAD_STEPS:
-            raise ParameterError(f"max_step: reaching alpha = {target:g} from {start:g} in steps of {step:g} takes "
+            raise ParameterError(f"max_step: reaching {target:g} from {start:g} in steps of {step:g} takes "
                                  f"{solves:.3g} solves, more than the documented limit {MAX_LOAD_STEPS}", "max_step")
         n = max(1, math.ceil(solves - 1e-12))
         path = [start + (target - start) * (i + 1) / n for i in range(n)]
     else:
         try:
-            path = [check_actuation(a, f"alphas[{i}]") for i, a in enumerate(alphas)]  # type: ignore[union-attr]
+            path = [check(a, f"alphas[{i}]") for i, a in enumerate(alphas)]  # type: ignore[union-attr]
         except TypeError:
             raise ParameterError(f"alphas: expected a number or a sequence of numbers, got {describe(alphas)}", "alphas") from None
         if not path:
             raise ParameterError("alphas: expected at least one alpha", "alphas")
+
+    def command(value: float) -> None:
+        if kind == "actuation":
+            body.set_actuation(index, value)
+        elif kind == "pull":
+            body.pull(index, displacement=value)
+        else:
+            body.pull(index, tension=value)
 
     results: list[StaticResult] = []
     previous: Any = initial.positions if isinstance(initial, StaticResult) else initial
@@ -586,7 +641,7 @@ def actuate(
         while True:
             # Retry from the last equilibrium with half the increment until it converges.
             trial = target if halvings == 0 else current + (target - current) / 2**halvings
-            body.set_actuation(index, trial)
+            command(trial)
             try:
                 result = solve_static(
                     body, gravity, tolerance=tolerance, max_iterations=max_iterations, initial=previous
@@ -594,11 +649,11 @@ def actuate(
             except ConvergenceError as err:
                 halvings += 1
                 if halvings > MAX_HALVINGS:
-                    body.set_actuation(index, current)
+                    command(current)
                     err.results = results  # type: ignore[attr-defined]
                     raise ConvergenceError(
-                        f"actuate: no equilibrium at alpha = {trial:g} after halving the step from "
-                        f"alpha = {current:g} {MAX_HALVINGS} times: {err}",
+                        f"actuate: no equilibrium at {kind} = {trial:g} after halving the step from "
+                        f"{kind} = {current:g} {MAX_HALVINGS} times: {err}",
                         err.report,
                     ) from err
                 continue

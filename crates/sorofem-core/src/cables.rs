@@ -1,7 +1,9 @@
 //! Building cables from user input: embed each point in the mesh (barycentric weights through the
 //! [`PointLocator`]), snap points just outside, and turn the rest into free nodes or errors.
+//! A cable is a chain of springs bonded to the body ([`Cable`]) or a tendon sliding through
+//! guide points ([`Tendon`]).
 
-use crate::energy::{Cable, PointMap};
+use crate::energy::{Cable, PointMap, Tendon, TendonCommand};
 use crate::error::{check_finite, Error, Result};
 use crate::locate::PointLocator;
 use crate::mesh::TetMesh;
@@ -15,9 +17,28 @@ pub enum Outside {
     Error,
 }
 
+/// How a cable acts on the body.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum CableModel {
+    /// A chain of unilateral springs bonded to the body at every point (stiffness, actuation,
+    /// transition and damping apply).
+    Springs,
+    /// An inextensible tendon sliding through its guide points, driven by its command (only the
+    /// points, `anchor_first` and `snap_tolerance` apply; guide points cannot be free nodes).
+    Tendon(TendonCommand),
+}
+
+/// Where cable `c` of a model lives: spring chain or tendon number `i` of its kind.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CableSlot {
+    Springs(usize),
+    Tendon(usize),
+}
+
 /// A cable as the user describes it.
 #[derive(Clone, Debug)]
 pub struct CableSpec {
+    pub model: CableModel,
     /// Ordered rest positions of the cable points (m), at least two.
     pub points: Vec<[f64; 3]>,
     /// Stiffness of each segment spring (N/m), > 0.
@@ -39,8 +60,10 @@ pub struct CableSpec {
 }
 
 impl CableSpec {
+    /// A spring chain.
     pub fn new(points: Vec<[f64; 3]>, stiffness: f64, actuation: f64) -> Self {
         CableSpec {
+            model: CableModel::Springs,
             points,
             stiffness,
             actuation,
@@ -50,6 +73,14 @@ impl CableSpec {
             outside: Outside::Error,
             free_node_mass: 0.0,
             damping: 0.0,
+        }
+    }
+
+    /// A tendon through `points` (the last one is where it is tied) under `command`.
+    pub fn tendon(points: Vec<[f64; 3]>, command: TendonCommand) -> Self {
+        CableSpec {
+            model: CableModel::Tendon(command),
+            ..CableSpec::new(points, 1.0, 1.0)
         }
     }
 }
@@ -68,7 +99,11 @@ pub enum PointPlacement {
 /// Cables embedded in a mesh, plus the free nodes they created.
 #[derive(Clone, Debug, Default)]
 pub struct EmbeddedCables {
+    /// The spring chains and the tendons, each in the order given; `slots[c]` says where spec
+    /// `c` went.
     pub cables: Vec<Cable>,
+    pub tendons: Vec<Tendon>,
+    pub slots: Vec<CableSlot>,
     pub placements: Vec<Vec<PointPlacement>>,
     /// Rest position (m) and mass (kg) of each free node.
     pub free_nodes: Vec<([f64; 3], f64)>,
@@ -124,13 +159,24 @@ pub fn embed(mesh: &TetMesh, specs: &[CableSpec]) -> Result<EmbeddedCables> {
                 spec.damping >= 0.0 && spec.damping.is_finite(),
             ),
         ] {
-            if !ok {
+            let applies = spec.model == CableModel::Springs || field == "snap_tolerance";
+            if applies && !ok {
                 let expected = match field {
                     "transition" => "a fraction in (0, 1)",
                     "snap_tolerance" | "free_node_mass" | "damping" => "a finite value >= 0",
                     _ => "a finite value > 0",
                 };
                 return Err(Error::invalid(&name(field), expected, value));
+            }
+        }
+        if let CableModel::Tendon(command) = spec.model {
+            check_tendon_command(c, command)?;
+            if spec.outside == Outside::FreeNode {
+                return Err(Error::invalid(
+                    &name("outside"),
+                    "\"error\" for a tendon (it slides through its guide points, which must lie in the body or be the anchor: a free guide point would have no stiffness along the tendon)",
+                    "\"free\"",
+                ));
             }
         }
         let mut maps = Vec::with_capacity(spec.points.len());
@@ -201,15 +247,60 @@ pub fn embed(mesh: &TetMesh, specs: &[CableSpec]) -> Result<EmbeddedCables> {
                 format!("points {k} and {} coincide", k + 1),
             ));
         }
-        out.cables.push(Cable {
-            points: maps,
-            rest_lengths,
-            stiffness: spec.stiffness,
-            actuation: spec.actuation,
-            transition: spec.transition,
-            damping: spec.damping,
-        });
+        match spec.model {
+            CableModel::Springs => {
+                out.slots.push(CableSlot::Springs(out.cables.len()));
+                out.cables.push(Cable {
+                    points: maps,
+                    rest_lengths,
+                    stiffness: spec.stiffness,
+                    actuation: spec.actuation,
+                    transition: spec.transition,
+                    damping: spec.damping,
+                });
+            }
+            CableModel::Tendon(command) => {
+                let tendon = Tendon {
+                    points: maps,
+                    rest_lengths,
+                    command,
+                    tension: 0.0,
+                };
+                check_pull(c, command, tendon.rest_length())?;
+                out.slots.push(CableSlot::Tendon(out.tendons.len()));
+                out.tendons.push(tendon);
+            }
+        }
         out.placements.push(placements);
     }
     Ok(out)
+}
+
+/// Checks a tendon command on its own: a finite pull, or a finite tension >= 0.
+pub(crate) fn check_tendon_command(c: usize, command: TendonCommand) -> Result<()> {
+    match command {
+        TendonCommand::Pull(d) if !d.is_finite() => Err(Error::invalid(
+            &format!("cables[{c}].pull"),
+            "a finite pulled length (m)",
+            d,
+        )),
+        TendonCommand::Tension(t) if !(t >= 0.0 && t.is_finite()) => Err(Error::invalid(
+            &format!("cables[{c}].tension"),
+            "a finite tension >= 0 N (a tendon cannot push)",
+            t,
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// Checks a pull against the tendon's rest length `rest_length` (m): it must leave some length.
+pub(crate) fn check_pull(c: usize, command: TendonCommand, rest_length: f64) -> Result<()> {
+    match command {
+        TendonCommand::Pull(d) if d >= rest_length => Err(Error::invalid(
+            &format!("cables[{c}].pull"),
+            format!("a pull shorter than the tendon's rest length {rest_length:.6} m"),
+            format!("{d} m"),
+        )),
+        _ => Ok(()),
+    }
 }

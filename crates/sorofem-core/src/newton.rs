@@ -142,6 +142,11 @@ pub trait NewtonProblem {
     fn auxiliary(&mut self) -> Option<&mut dyn AuxiliaryIterates> {
         None
     }
+    /// Whether `z` also meets the problem's own tolerances (exact constraints), which the
+    /// relative residual test alone does not guarantee: an iterate converges when both hold.
+    fn constraints_met(&self, _z: &[f64]) -> bool {
+        true
+    }
     /// Whether [`NewtonProblem::direction`] may solve with a factorisation kept from earlier
     /// iterates (modified Newton): a Hessian assembled beside a line-search trial would then
     /// often go unused, so none is.
@@ -296,7 +301,9 @@ fn newton_step(
     // Whether the full-step trial also assembles the Hessian there (see below).
     let mut prepare_next = false;
     for _ in 0..options.max_iterations {
-        if g_norm <= options.tolerance * reference || reference == 0.0 {
+        if (g_norm <= options.tolerance * reference || reference == 0.0)
+            && problem.constraints_met(z)
+        {
             return Ok(true);
         }
         report.iterations += 1;
@@ -420,7 +427,7 @@ fn newton_step(
         report.residual_history.push(g_norm / reference);
         report.energy_history.push(energy);
     }
-    Ok(g_norm <= options.tolerance * reference)
+    Ok(g_norm <= options.tolerance * reference && problem.constraints_met(z))
 }
 
 #[cfg(test)]

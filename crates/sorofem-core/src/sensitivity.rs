@@ -14,9 +14,17 @@
 //! ([`crate::energy::ParamTerm`]), element by element: nothing here is specific to a term.
 //! Parameters are named blocks: the material's parameters (per tet, Pa or as the model
 //! declares), `density` (per tet, kg/m^3), `gravity` (3, m/s^2), `cable_actuation` and
-//! `cable_stiffness` (per cable, 1 and N/m).
+//! `cable_stiffness` (per cable, 1 and N/m; spring cables), `cable_tension` and `cable_pull`
+//! (per cable, N and m; tendons under force and displacement control).
+//!
+//! A displacement-controlled tendon taut at the solution (`T > 0`) is an active constraint
+//! `g = L(z) - (L0 - d) = 0` with multiplier T, which stays active under small changes: the
+//! system is bordered, `[[H, J^T], [J, 0]] [dz; dT] = -[dr/dtheta; dg/dtheta] delta`, and solved
+//! through the Schur complement `S = J H^{-1} J^T` with the same factorisation of H
+//! (`dg/dd = 1`). The adjoint is the transposed system: `mu = S^{-1} J H^{-1} dO/dz`,
+//! `lambda = H^{-1} (dO/dz - J^T mu)`, and `dO/dd = -mu`. A slack tendon (`T = 0`) is inactive.
 
-use crate::energy::{HessianMode, ParamTerm};
+use crate::energy::{HessianMode, ParamTerm, TendonCommand};
 use crate::error::{Error, Result};
 use crate::model::Model;
 use rayon::prelude::*;
@@ -176,6 +184,31 @@ impl ElementScratch {
     }
 }
 
+/// An active tendon constraint at the solution: its cable, `J` (free DOFs) and `H^{-1} J^T`.
+struct ActiveTendon {
+    cable: usize,
+    row: Vec<f64>,
+    solved: Vec<f64>,
+}
+
+/// `S^{-1} rhs` for the Schur complement `S_ij = J_i . H^{-1} J_j` of the active tendons.
+fn schur_solve(active: &[ActiveTendon], rhs: Vec<f64>) -> Result<Vec<f64>> {
+    let m = active.len();
+    let schur = nalgebra::DMatrix::from_fn(m, m, |i, j| dot(&active[i].row, &active[j].solved));
+    schur
+        .lu()
+        .solve(&nalgebra::DVector::from_vec(rhs))
+        .filter(|x| x.iter().all(|v| v.is_finite()))
+        .map(|x| x.as_slice().to_vec())
+        .ok_or_else(|| Error::LinearSolver {
+            message: "the taut tendons' constraints are dependent at the solution (two tendons along the same path?): their tension sensitivities are undefined".into(),
+        })
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
 /// Adds `w . d(grad_term)/dtheta` at the full DOF vector `z` to `flat` (the parameters laid out
 /// by a [`ParamLayout`], `offsets` this term's block offsets there). The element kernels run in
 /// parallel (large terms); their values are summed in element order.
@@ -248,6 +281,29 @@ pub(crate) fn add_derivative_along(
 }
 
 impl Model {
+    /// The displacement-controlled tendons taut at the last solution, with `H^{-1} J^T` from
+    /// the factorisation there.
+    fn active_tendons(&self) -> Vec<ActiveTendon> {
+        let (z, _) = self.last_state.as_ref().expect("prepared");
+        let term = &self.terms.tendons;
+        let free = self.assembler.full_of_free();
+        (term.tendons.iter().enumerate())
+            .filter(|(_, t)| matches!(t.command, TendonCommand::Pull(_)) && t.tension > 0.0)
+            .map(|(i, tendon)| {
+                let mut full = vec![0.0; z.len()];
+                tendon.add_length_gradient(z, 1.0, &mut full);
+                let row: Vec<f64> = free.iter().map(|&d| full[d]).collect();
+                let mut solved = row.clone();
+                self.factor.solve_in_place(&mut solved);
+                ActiveTendon {
+                    cable: term.cable_index(i),
+                    row,
+                    solved,
+                }
+            })
+            .collect()
+    }
+
     /// The model's parameters, all zero: the material's parameters (per tet), `density` (per
     /// tet), `gravity` (3), `cable_actuation` and `cable_stiffness` (per cable).
     pub fn param_zeros(&self) -> ParamVector {
@@ -342,17 +398,44 @@ impl Model {
             })
             .collect();
         self.factor.solve_in_place(&mut rhs);
+        let active = self.active_tendons();
+        let mut multipliers = Vec::new();
+        if !active.is_empty() {
+            multipliers = schur_solve(&active, active.iter().map(|a| dot(&a.row, &rhs)).collect())?;
+            for (a, mu) in active.iter().zip(&multipliers) {
+                for (l, s) in rhs.iter_mut().zip(&a.solved) {
+                    *l -= mu * s;
+                }
+            }
+        }
         let mut w = vec![0.0; self.layout.n_full()];
         for (&d, l) in self.assembler.full_of_free().iter().zip(&rhs) {
             w[d] = -l;
         }
-        Ok(self.contract_param_derivatives(&w))
+        let mut gradient = self.contract_param_derivatives(&w);
+        let pulls = gradient.get_mut("cable_pull").expect("the tendons' block");
+        for (a, mu) in active.iter().zip(&multipliers) {
+            pulls[a.cable] -= mu;
+        }
+        Ok(gradient)
     }
 
     /// Forward sensitivity along a parameter direction (any of the blocks of
     /// [`Model::param_zeros`]; missing blocks are zero): `(dx, dp)` with dx the change of the
     /// node positions (3 n, m per unit of the direction) and dp of the pressures (mixed only).
     pub fn forward(&mut self, direction: &ParamVector) -> Result<(Vec<f64>, Option<Vec<f64>>)> {
+        self.forward_with_tensions(direction)
+            .map(|(dx, dp, _)| (dx, dp))
+    }
+
+    /// [`Model::forward`] and the change of each tendon's tension (N per unit of the
+    /// direction; `None` for spring cables): the direction's own under force control, the
+    /// multiplier's under displacement control (0 when slack).
+    #[allow(clippy::type_complexity)]
+    pub fn forward_with_tensions(
+        &mut self,
+        direction: &ParamVector,
+    ) -> Result<(Vec<f64>, Option<Vec<f64>>, Vec<Option<f64>>)> {
         self.prepare_sensitivities()?;
         let b = self.param_derivative_along(direction)?;
         let mut rhs: Vec<f64> = self
@@ -362,6 +445,33 @@ impl Model {
             .map(|&d| -b[d])
             .collect();
         self.factor.solve_in_place(&mut rhs);
+        let n_cables = self.n_cables();
+        let block = |name: &str| {
+            direction
+                .get(name)
+                .map_or(vec![0.0; n_cables], |v| v.to_vec())
+        };
+        let (pulls, given_tensions) = (block("cable_pull"), block("cable_tension"));
+        let mut tensions: Vec<Option<f64>> = (0..n_cables)
+            .map(|c| match self.tendon_command(c) {
+                Ok(TendonCommand::Tension(_)) => Some(given_tensions[c]),
+                Ok(TendonCommand::Pull(_)) => Some(0.0),
+                Err(_) => None,
+            })
+            .collect();
+        let active = self.active_tendons();
+        if !active.is_empty() {
+            let schur_rhs = (active.iter())
+                .map(|a| dot(&a.row, &rhs) + pulls[a.cable])
+                .collect();
+            let changes = schur_solve(&active, schur_rhs)?;
+            for (a, dt) in active.iter().zip(&changes) {
+                for (x, s) in rhs.iter_mut().zip(&a.solved) {
+                    *x -= dt * s;
+                }
+                tensions[a.cable] = Some(*dt);
+            }
+        }
         let mut dz = vec![0.0; self.layout.n_full()];
         for (&d, v) in self.assembler.full_of_free().iter().zip(&rhs) {
             dz[d] = *v;
@@ -371,6 +481,6 @@ impl Model {
             .pressure_offset()
             .map(|offset| dz[offset..].to_vec());
         dz.truncate(3 * self.mesh.n_nodes());
-        Ok((dz, pressure))
+        Ok((dz, pressure, tensions))
     }
 }

@@ -125,7 +125,9 @@ fn forward_directions_name_the_models_parameters() {
             "density",
             "gravity",
             "cable_actuation",
-            "cable_stiffness"
+            "cable_stiffness",
+            "cable_tension",
+            "cable_pull"
         ]
     );
     let mut bogus = zeros.clone();

@@ -152,14 +152,17 @@ pub fn faces_to_numpy<'py>(py: Python<'py>, faces: &[[usize; 3]]) -> Bound<'py, 
         .expect("3 k values")
 }
 
-/// A cable description: a dict with "points" ((k, 3) float64, m), "stiffness" (N/m),
-/// "actuation", and optionally "transition", "anchor_first", "snap_tolerance" (m),
-/// "outside" ("error" | "free"), "free_node_mass" (kg) and "damping" (N s/m).
+/// A cable description: a dict with "points" ((k, 3) float64, m), "model" ("springs", the
+/// default, or "tendon"); a spring chain's "stiffness" (N/m), "actuation", and optionally
+/// "transition", "free_node_mass" (kg) and "damping" (N s/m); a tendon's "pull" (m) or
+/// "tension" (N) (at most one; neither: pull 0); and optionally "anchor_first",
+/// "snap_tolerance" (m) and "outside" ("error" | "free").
 pub fn cable_spec(
     index: usize,
     item: &Bound<'_, PyAny>,
 ) -> Result<sorofem_core::cables::CableSpec, Error> {
-    use sorofem_core::cables::{CableSpec, Outside};
+    use sorofem_core::cables::{CableModel, CableSpec, Outside};
+    use sorofem_core::energy::TendonCommand;
     let name = |key: &str| format!("cables[{index}].{key}");
     let get = |key: &str| -> Option<Bound<'_, PyAny>> { item.get_item(key).ok() };
     let float = |key: &str, default: Option<f64>| -> Result<f64, Error> {
@@ -172,15 +175,48 @@ pub fn cable_spec(
     };
     let points_obj = get("points")
         .ok_or_else(|| Error::invalid(&name("points"), "a (k, 3) array of points", "nothing"))?;
-    let mut spec = CableSpec::new(
-        points(&name("points"), &points_obj)?,
-        float("stiffness", None)?,
-        float("actuation", Some(1.0))?,
-    );
-    spec.transition = float("transition", Some(spec.transition))?;
+    let model = match get("model") {
+        None => "springs".to_string(),
+        Some(v) => v.extract::<String>().map_err(|_| {
+            Error::shape(&name("model"), "\"springs\" or \"tendon\"", v.to_string())
+        })?,
+    };
+    let points = points(&name("points"), &points_obj)?;
+    let mut spec = match model.as_str() {
+        "springs" => CableSpec::new(
+            points,
+            float("stiffness", None)?,
+            float("actuation", Some(1.0))?,
+        ),
+        "tendon" => {
+            let command = match (get("pull"), get("tension")) {
+                (Some(_), Some(_)) => {
+                    return Err(Error::invalid(
+                        &name("pull"),
+                        "either a pull or a tension, not both",
+                        "both",
+                    ))
+                }
+                (_, Some(_)) => TendonCommand::Tension(float("tension", None)?),
+                _ => TendonCommand::Pull(float("pull", Some(0.0))?),
+            };
+            CableSpec::tendon(points, command)
+        }
+        other => {
+            return Err(Error::invalid(
+                &name("model"),
+                "\"springs\" or \"tendon\"",
+                format!("{other:?}"),
+            ))
+        }
+    };
+    let springs = spec.model == CableModel::Springs;
     spec.snap_tolerance = float("snap_tolerance", Some(0.0))?;
-    spec.free_node_mass = float("free_node_mass", Some(0.0))?;
-    spec.damping = float("damping", Some(0.0))?;
+    if springs {
+        spec.transition = float("transition", Some(spec.transition))?;
+        spec.free_node_mass = float("free_node_mass", Some(0.0))?;
+        spec.damping = float("damping", Some(0.0))?;
+    }
     if let Some(v) = get("anchor_first") {
         spec.anchor_first = v
             .extract::<bool>()

@@ -8,6 +8,7 @@ use crate::options::SolveOptions;
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
+use sorofem_core::energy::TendonCommand;
 use sorofem_core::{Material, SolveOptions as CoreOptions, TetMesh};
 use std::sync::Arc;
 
@@ -244,6 +245,8 @@ impl Model {
             .map(|t| PyArray1::from_slice(py, t))
             .collect();
         out.set_item("cable_tensions", tensions)?;
+        out.set_item("tendon_tensions", &solution.tendon_tensions)?;
+        out.set_item("tendon_pulls", &solution.tendon_pulls)?;
         match solution.pressure {
             Some(p) => out.set_item("pressure", PyArray1::from_vec(py, p))?,
             None => out.set_item("pressure", py.None())?,
@@ -426,6 +429,8 @@ impl Model {
             })
             .collect();
         out.set_item("cable_points", cable_points)?;
+        out.set_item("tendon_tensions", &trajectory.tendon_tensions)?;
+        out.set_item("tendon_pulls", &trajectory.tendon_pulls)?;
         out.set_item(
             "kinetic_energy",
             PyArray1::from_slice(py, &trajectory.kinetic_energy),
@@ -473,7 +478,8 @@ impl Model {
     }
 
     /// Forward sensitivity along a parameter direction (dict with any of the adjoint's keys):
-    /// returns {"dx": (n, 3), "dp": (n,) or None}.
+    /// returns {"dx": (n, 3), "dp": (n,) or None, "dtension": per cable, the tendon's tension
+    /// change (N) or None for a spring cable}.
     fn forward<'py>(
         &mut self,
         py: Python<'py>,
@@ -481,9 +487,10 @@ impl Model {
     ) -> PyResult<Bound<'py, PyDict>> {
         let delta = convert::param_direction(direction, &self.inner.param_zeros()).py(py)?;
         let inner = &mut self.inner;
-        let (dx, dp) = guarded(py, || inner.forward(&delta))?;
+        let (dx, dp, dtension) = guarded(py, || inner.forward_with_tensions(&delta))?;
         let out = PyDict::new(py);
         out.set_item("dx", convert::points_to_numpy(py, &dx))?;
+        out.set_item("dtension", dtension)?;
         match dp {
             Some(p) => out.set_item("dp", PyArray1::from_vec(py, p))?,
             None => out.set_item("dp", py.None())?,
@@ -530,6 +537,43 @@ impl Model {
     ) -> PyResult<()> {
         let inner = &mut self.inner;
         guarded(py, || inner.set_cable_stiffness(cable, stiffness))
+    }
+
+    /// Sets tendon `cable`'s command: `kind` "pull" (m) or "tension" (N).
+    fn set_tendon_command(
+        &mut self,
+        py: Python<'_>,
+        cable: usize,
+        kind: &str,
+        value: f64,
+    ) -> PyResult<()> {
+        let command = match kind {
+            "pull" => TendonCommand::Pull(value),
+            "tension" => TendonCommand::Tension(value),
+            other => {
+                return Err(to_py(
+                    py,
+                    sorofem_core::Error::invalid(
+                        "kind",
+                        "\"pull\" or \"tension\"",
+                        format!("{other:?}"),
+                    ),
+                ))
+            }
+        };
+        let inner = &mut self.inner;
+        guarded(py, || inner.set_tendon_command(cable, command))
+    }
+
+    /// Strain energy (J) of the body at positions (n, 3): the elastic term alone.
+    fn strain_energy(&self, py: Python<'_>, positions: &Bound<'_, PyAny>) -> PyResult<f64> {
+        let positions: Vec<f64> = convert::points("positions", positions)
+            .py(py)?
+            .into_iter()
+            .flatten()
+            .collect();
+        let inner = &self.inner;
+        guarded(py, || inner.strain_energy(&positions))
     }
 
     /// Rest length (m) of each segment, per cable, between the attached points.

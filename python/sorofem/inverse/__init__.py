@@ -11,7 +11,8 @@ solves, forward and adjoint sensitivities from the extension):
   least squares (Levenberg-Marquardt on the Jacobian from forward sensitivities), L-BFGS-B
   (adjoint gradient of ``1/2 |r|^2``) or Nelder-Mead (no derivatives); several scenarios
   jointly, several starts, Gauss-Newton uncertainty.
-* :func:`control`: cable actuations that bring a target as close as possible.
+* :func:`control`: cable commands (spring alphas, tendon pulls or tensions) that bring a
+  target as close as possible.
 
 Parameters (``params=``), each a scalar unless noted:
 
@@ -28,6 +29,8 @@ name                          meaning                               optimised as
 ``gravity``                   ``(3,)`` m/s^2 (:func:`gradient` only) itself
 ``cable_actuation``           alpha per cable ``(c,)``              log alpha
 ``cable_stiffness``           N/m per cable ``(c,)``                log k
+``cable_pull``                m, pull per tendon ``(c,)``           itself
+``cable_tension``             N, tension per tendon ``(c,)``        itself
 ============================  ====================================  =========================
 
 A material name may be restricted to a region, ``"shear_modulus:soft"``, with

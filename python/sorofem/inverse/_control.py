@@ -1,4 +1,5 @@
-"""Control: the cable actuations that bring a target as close as possible, :func:`control`."""
+"""Control: the cable commands (spring actuations, tendon pulls or tensions) that bring a target
+as close as possible, :func:`control`."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._validate import MAX_EVALUATIONS, boolean, count, describe, positive_scalar
+from ..cables import cable_index
 from ..errors import InputError
 from ..progress import Progress
 from ..solver import SolveOptions
@@ -21,30 +23,15 @@ from .results import ControlResult
 __all__ = ["control"]
 
 
-def _alpha_bounds(bounds: Any, n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``(lo, hi)`` alphas per controlled cable: finite, ``0 < lo <= hi``."""
-    if bounds is None:
-        return np.full(n, 0.3), np.full(n, 1.0)
+def _bound_pairs(bounds: Any, n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(lo, hi)`` per controlled cable, shape ``(n, 2)`` (each cable's kind checks its own)."""
     try:
         arr = np.asarray(bounds, dtype=np.float64)
     except (TypeError, ValueError):
         arr = np.zeros(0)
     if arr.shape != (n, 2):
         raise InputError(f"bounds: expected one (lo, hi) per controlled cable, shape ({n}, 2), got {describe(bounds)}")
-    lo, hi = arr[:, 0], arr[:, 1]
-    if not np.all(np.isfinite(arr) & (lo > 0) & (lo <= hi)):
-        raise InputError(f"bounds: expected finite 0 < lo <= hi for every cable, got {arr.tolist()}")
-    return lo, hi
-
-
-def _alphas(x0: Any, n: int) -> NDArray[np.float64]:
-    try:
-        theta0 = np.asarray(x0, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError):
-        theta0 = np.zeros(0)
-    if theta0.shape != (n,) or not np.all(np.isfinite(theta0) & (theta0 > 0)):
-        raise InputError(f"x0: expected {n} finite alphas > 0, got {describe(x0)}")
-    return theta0
+    return arr[:, 0], arr[:, 1]
 
 
 def control(
@@ -68,12 +55,13 @@ def control(
     progress: bool | None = None,
     options: SolveOptions | None = None,
 ) -> ControlResult:
-    """Cable actuations that bring a target as close as possible.
+    """Cable commands that bring a target as close as possible.
 
-    Minimises ``1/2 |r|^2`` over the actuation alpha of the chosen cables (in log alpha,
-    within ``bounds``), with the adjoint gradient (``"l-bfgs-b"``) or without
-    (``"nelder-mead"``). When the target cannot be reached, the result is the closest
-    reachable configuration and ``reachable`` is False.
+    Minimises ``1/2 |r|^2`` over the commands of the chosen cables, within ``bounds``: the
+    actuation alpha of a spring cable (in log alpha), the pull of a tendon driven by its pull
+    (in metres) or the tension of one driven by its tension (in newtons), with the adjoint
+    gradient (``"l-bfgs-b"``) or without (``"nelder-mead"``). When the target cannot be
+    reached, the result is the closest reachable configuration and ``reachable`` is False.
 
     Parameters
     ----------
@@ -84,10 +72,12 @@ def control(
     cables
         The cables to actuate (:class:`~sorofem.Cable` or indices), default all.
     bounds
-        One ``(lo, hi)`` alpha range per cable (default ``(0.3, 1.0)``).
+        One ``(lo, hi)`` range per cable in its command's units: alpha (default
+        ``(0.3, 1.0)``), pull in m (default ``(0, L0 / 4)``, ``L0`` the tendon's rest length)
+        or tension in N (no default: give it).
     x0
-        Initial alphas (default: the middle of the bounds; a cable at rest length is slack
-        and has no gradient).
+        Initial commands (default: the middle of the bounds, geometric for alphas; a cable
+        at rest length is slack and has no gradient).
     tolerance
         Distance (RMS over the target's points, m) counted as reached; default 1 mm.
     gravity, solve_tolerance, max_iterations, load_steps
@@ -126,20 +116,46 @@ def control(
     if cables is not None and (isinstance(cables, (str, bytes)) or not isinstance(cables, Sequence)):
         raise InputError(f"cables: expected a list of cables (sorofem.Cable or indices), got {describe(cables)}")
     t0 = time.perf_counter()
-    p = Parameters(body, ["cable_actuation"], cables=cables)
+    ids = list(range(len(body.cables))) if cables is None else [cable_index(body, c) for c in cables]
+    if not ids:
+        raise InputError("cables: expected at least one cable to control")
+    if len(set(ids)) != len(ids):
+        raise InputError(f"cables: a cable is listed twice: {ids}")
+    kinds = [_COMMAND_PARAMETER[body.commands[c][0]] for c in ids]
+    names = [k for k in ("cable_actuation", "cable_pull", "cable_tension") if k in kinds]
+    p = Parameters(body, names, cables={k: [c for c, kind in zip(ids, kinds) if kind == k] for k in names})
     n = p.size
-    lo_a, hi_a = _alpha_bounds(bounds, n)
-    lo, hi = np.log(lo_a), np.log(hi_a)
-    theta0 = np.sqrt(lo_a * hi_a) if x0 is None else _alphas(x0, n)
+    # theta (and s) are grouped by command kind; the user's values follow ``ids``.
+    order = np.array([next(b.offset + list(b.cables).index(c) for b in p.blocks if b.kind == kind)
+                      for c, kind in zip(ids, kinds)])
+    if bounds is None:
+        bounds = [_default_bounds(body, c, kind) for c, kind in zip(ids, kinds)]
+    lo_u, hi_u = _bound_pairs(bounds, n)
+    for i, (c, kind) in enumerate(zip(ids, kinds)):
+        _check_bounds(body, c, kind, lo_u[i], hi_u[i])
+    if x0 is None:
+        theta0_u = np.where(np.array(kinds) == "cable_actuation", np.sqrt(np.abs(lo_u * hi_u)), 0.5 * (lo_u + hi_u))
+    else:
+        try:
+            theta0_u = np.asarray(x0, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            raise InputError(f"x0: expected {n} finite commands (alphas > 0), got {describe(x0)}") from None
+        if theta0_u.shape != (n,) or not all(
+            np.isfinite(v) and (v > 0 or kind != "cable_actuation") for v, kind in zip(theta0_u, kinds)
+        ):
+            raise InputError(f"x0: expected {n} finite commands (alphas > 0), got {np.asarray(x0).tolist()}")
+    theta0, lo_a, hi_a = (np.empty(n) for _ in range(3))
+    theta0[order], lo_a[order], hi_a[order] = theta0_u, lo_u, hi_u
+    lo, hi = p.to_s(lo_a), p.to_s(hi_a)
     solve = SolveOptions(solve_tolerance, max_iterations, load_steps) if options is None else options
     scs = make_scenarios(body, target, None if initial is None else [{"initial": initial}], gravity, solve)
     problem = Problem(body, p, scs)
     problem.progress = bar = Progress(desc=f"control ({method})", unit="solves", enabled=progress)
     record = Recorder(problem, verbose, None, 0, t0)
     try:
-        s, iters, _, msg = scipy_minimize(problem, np.clip(np.log(theta0), lo, hi), lo, hi, record, method, max_evaluations, xtol, ftol)
-        alpha = np.exp(s)
-        st = p.state(alpha)
+        s, iters, _, msg = scipy_minimize(problem, np.clip(p.to_s(theta0), lo, hi), lo, hi, record, method, max_evaluations, xtol, ftol)
+        theta = p.from_s(s)
+        st = p.state(theta)
         results = final_results(body, body.material, st, scs, p)
     finally:
         bar.close()
@@ -149,8 +165,8 @@ def control(
     distance = bound.rms(result.positions)
     reachable = distance <= tolerance
     active = [
-        f"cable {int(c)}: alpha at its {'lower' if abs(s[i] - lo[i]) < 1e-9 else 'upper'} bound {alpha[i]:.4g}"
-        for i, c in enumerate(p.blocks[0].cables)
+        f"cable {c}: {_WORD[kind]} at its {'lower' if abs(s[i] - lo[i]) < 1e-9 else 'upper'} bound {theta[i]:.4g}"
+        for c, kind, i in zip(ids, kinds, order)
         if abs(s[i] - lo[i]) < 1e-9 or abs(s[i] - hi[i]) < 1e-9
     ]
     if reachable:
@@ -161,7 +177,7 @@ def control(
             f"above the tolerance {tolerance:g} m" + (f"; {'; '.join(active)}" if active else "")
         )
     return ControlResult(
-        actuation=alpha,
+        actuation=theta[order],
         distance=distance,
         max_distance=bound.max_distance(result.positions),
         reachable=bool(reachable),
@@ -176,3 +192,30 @@ def control(
         history=record.entries,
         targets=[(sc.name, sc.target) for sc in scs],
     )
+
+
+#: The parameter of each cable command, and how messages call it.
+_COMMAND_PARAMETER = {"actuation": "cable_actuation", "pull": "cable_pull", "tension": "cable_tension"}
+_WORD = {"cable_actuation": "alpha", "cable_pull": "pull (m)", "cable_tension": "tension (N)"}
+
+
+def _default_bounds(body: Any, c: int, kind: str) -> tuple[float, float]:
+    if kind == "cable_actuation":
+        return (0.3, 1.0)
+    if kind == "cable_pull":
+        return (0.0, 0.25 * body.cables[c].length)
+    raise InputError(f"bounds: cable {c} is a tendon driven by its tension: give its (lo, hi) in N")
+
+
+def _check_bounds(body: Any, c: int, kind: str, lo: float, hi: float) -> None:
+    if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi):
+        raise InputError(f"bounds: expected finite lo <= hi for cable {c}, got ({lo:g}, {hi:g})")
+    if kind == "cable_actuation" and not lo > 0:
+        raise InputError(f"bounds: expected 0 < lo <= hi (alpha) for cable {c}, got ({lo:g}, {hi:g})")
+    if kind == "cable_pull" and not hi < body.cables[c].length:
+        raise InputError(
+            f"bounds: a pull must stay below the tendon's rest length {body.cables[c].length:.6g} m, cable {c} "
+            f"has hi = {hi:g} m"
+        )
+    if kind == "cable_tension" and not lo >= 0:
+        raise InputError(f"bounds: a tension is >= 0 N, cable {c} has lo = {lo:g} N")

@@ -21,12 +21,19 @@ from .._validate import describe
 from ..errors import InputError, ParameterError
 from ..materials import IDENTITY, LOG, NEO_HOOKEAN, Form, MaterialModel, Transform
 
-__all__ = ["PARAMETERS", "parameter_names", "core_sensitivities", "Parameters", "Block", "State"]
+__all__ = ["PARAMETERS", "COMMAND_PARAMETERS", "parameter_names", "core_sensitivities", "Parameters", "Block", "State"]
 
 #: Parameters that are not the material's: gravity (``(3,)``, m/s^2, :func:`sorofem.gradient`
-#: only) and per-cable actuation alpha and segment stiffness (N/m).
-_GRAVITY, _CABLES = "gravity", ("cable_actuation", "cable_stiffness")
-_TRANSFORMS = {_GRAVITY: IDENTITY, "cable_actuation": LOG, "cable_stiffness": LOG}
+#: only), per spring cable its actuation alpha and segment stiffness (N/m), and per tendon its
+#: pull (m) or tension (N), whichever command drives it.
+_GRAVITY, _CABLES = "gravity", ("cable_actuation", "cable_stiffness", "cable_pull", "cable_tension")
+_TRANSFORMS = {_GRAVITY: IDENTITY, "cable_actuation": LOG, "cable_stiffness": LOG, "cable_pull": IDENTITY,
+               "cable_tension": IDENTITY}
+#: The cable command each cable parameter needs (:attr:`sorofem.Body.commands`).
+_CABLE_COMMAND = {"cable_actuation": "actuation", "cable_stiffness": "actuation", "cable_pull": "pull",
+                  "cable_tension": "tension"}
+#: The cable parameters that are commands (the others are properties of the cable).
+COMMAND_PARAMETERS = ("cable_actuation", "cable_pull", "cable_tension")
 _FIELD = "_field"
 
 
@@ -65,7 +72,8 @@ class Block:
 @dataclass
 class State:
     """The core's values at a theta: every material parameter per element (the core's own and
-    those of the other forms), gravity (None: the scenario's), cable actuations and stiffnesses."""
+    those of the other forms), gravity (None: the scenario's), each cable's command value (alpha,
+    pull or tension, as :attr:`sorofem.Body.commands`) and stiffness."""
 
     material: dict[str, NDArray[np.float64]]
     gravity: NDArray[np.float64] | None
@@ -95,7 +103,7 @@ class Parameters:
         body: Any,
         names: str | Sequence[str],
         regions: Mapping[str, ArrayLike] | None = None,
-        cables: Sequence[Any] | None = None,
+        cables: Sequence[Any] | Mapping[str, Sequence[Any]] | None = None,
     ) -> None:
         if isinstance(names, str):
             names = [names]
@@ -106,11 +114,24 @@ class Parameters:
         material_names = set(model.estimable())
         m = body.mesh.n_tets
         n_cables = len(body.cables)
-        cable_ids = (
-            np.arange(n_cables, dtype=np.int64)
-            if cables is None
-            else np.array([cable_index(body, c) for c in cables], dtype=np.int64)
-        )
+        commands = [kind for kind, _ in body.commands]
+
+        def cable_ids(kind: str) -> NDArray[np.int64]:
+            """The cables of a cable block: those given (per name, when a mapping), else every
+            cable the parameter applies to."""
+            chosen = cables.get(kind) if isinstance(cables, Mapping) else cables
+            if chosen is None:
+                return np.array([c for c in range(n_cables) if commands[c] == _CABLE_COMMAND[kind]], dtype=np.int64)
+            ids = np.array([cable_index(body, c) for c in chosen], dtype=np.int64)
+            for c in ids:
+                if commands[c] != _CABLE_COMMAND[kind]:
+                    what = {"actuation": "a spring cable", "pull": "a tendon driven by its pull",
+                            "tension": "a tendon driven by its tension"}
+                    raise InputError(
+                        f"params: {kind!r} applies to {what[_CABLE_COMMAND[kind]]}; cable {int(c)} is "
+                        f"{what[commands[c]]}"
+                    )
+            return ids
         self.body = body
         self.model = model
         self.blocks: list[Block] = []
@@ -135,10 +156,14 @@ class Parameters:
             for form in model.forms:
                 if base in form.names:
                     in_form[form.names][elements] = True
+            ids = np.zeros(0, dtype=np.int64)
             if kind in _CABLES:
                 if n_cables == 0:
                     raise InputError(f"params: {name!r} needs cables; the body has none")
-                size = len(cable_ids)
+                ids = cable_ids(kind)
+                if ids.size == 0:
+                    raise InputError(f"params: {name!r} applies to none of the body's cables")
+                size = len(ids)
             elif kind == _GRAVITY:
                 size = 3
             elif kind.endswith(_FIELD):
@@ -148,7 +173,7 @@ class Parameters:
             if any(b.name == name for b in self.blocks):
                 raise InputError(f"params: {name!r} given twice")
             transform = _TRANSFORMS.get(kind) or model.parameter(base).transform
-            self.blocks.append(Block(name, kind, elements, cable_ids, size, transform, offset))
+            self.blocks.append(Block(name, kind, elements, ids, size, transform, offset))
             offset += size
         used = [form for form in model.forms if in_form[form.names].any()]
         for i, a in enumerate(used):
@@ -183,7 +208,7 @@ class Parameters:
                 theta[b.slice] = float(np.mean(source[b.elements]))
             elif b.kind == _GRAVITY:
                 theta[b.slice] = np.zeros(3) if gravity is None else np.asarray(gravity, dtype=np.float64)
-            elif b.kind == "cable_actuation":
+            elif b.kind in COMMAND_PARAMETERS:
                 theta[b.slice] = self.alpha0[b.cables]
             else:
                 theta[b.slice] = self.k0[b.cables]
@@ -248,7 +273,7 @@ class Parameters:
             v = theta[b.slice]
             if b.kind == _GRAVITY:
                 gravity = v.copy()
-            elif b.kind == "cable_actuation":
+            elif b.kind in COMMAND_PARAMETERS:
                 alpha[b.cables] = v
             elif b.kind == "cable_stiffness":
                 k[b.cables] = v

@@ -11,6 +11,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
+from ..body import set_cable_values
 from ..cables import cable_index
 from ..errors import InputError, SolverError
 from ..materials import Material
@@ -18,7 +19,7 @@ from ..progress import Progress
 from ..solver import SolveOptions
 from ..static import StaticResult, solve_static
 from ..targets import BoundTarget, Target
-from ._parameters import Parameters, State
+from ._parameters import COMMAND_PARAMETERS, Parameters, State
 
 __all__ = ["Scenario", "scenarios", "bind", "Problem", "fitted_material", "final_results", "DEFAULT_TOLERANCE"]
 
@@ -117,12 +118,11 @@ class Problem:
         if sc.actuation is not None:
             untouched = np.ones(len(alpha), dtype=bool)
             for b in self.params.blocks:
-                if b.kind == "cable_actuation":
+                if b.kind in COMMAND_PARAMETERS:
                     untouched[b.cables] = False
             alpha[untouched] = sc.actuation[untouched]
-        for c in range(len(alpha)):
-            model.set_actuation(c, float(alpha[c]))
-            model.set_cable_stiffness(c, float(st.stiffness[c]))
+        kinds = [kind for kind, _ in self.body.commands]
+        set_cable_values(model, list(zip(kinds, alpha)), st.stiffness)
         g = sc.gravity if st.gravity is None else st.gravity
         opts = sc.solve
         attempts = [(sc.initial, opts.load_steps)]
@@ -244,15 +244,20 @@ def final_results(body: Any, material: Material, st: State, scs: list[Scenario],
     """One StaticResult per scenario at the fitted parameters (warm-started, cheap): solved by a
     copy of ``body`` with ``material`` and the fitted cable values, which shares its model."""
     fitted = body.replace(material=material)
-    controlled = [c for b in p.blocks if b.kind == "cable_actuation" for c in b.cables]
+    controlled = [c for b in p.blocks if b.kind in COMMAND_PARAMETERS for c in b.cables]
     results = []
     for sc in scs:
         alpha = st.actuation.copy()
         if sc.actuation is not None:
             alpha = np.where(np.isin(np.arange(len(alpha)), controlled), alpha, sc.actuation)
-        for c in range(len(alpha)):
-            fitted.set_actuation(c, float(alpha[c]))
-            fitted.set_cable_stiffness(c, float(st.stiffness[c]))
+        for c, (kind, _) in enumerate(body.commands):
+            if kind == "actuation":
+                fitted.set_actuation(c, float(alpha[c]))
+                fitted.set_cable_stiffness(c, float(st.stiffness[c]))
+            elif kind == "pull":
+                fitted.pull(c, displacement=float(alpha[c]))
+            else:
+                fitted.pull(c, tension=float(alpha[c]))
         g = sc.gravity if st.gravity is None else st.gravity
         # The last warm start may be a rejected trial's equilibrium, far from this one: fall back
         # as the evaluations do (from rest, then in more load steps).

@@ -425,7 +425,8 @@ class ControlResult:
     Attributes
     ----------
     actuation
-        ``(c,)`` alpha of each controlled cable (in the order of ``cables``).
+        ``(c,)`` command of each controlled cable (in the order of ``cables``): the alpha of
+        a spring cable, the pull (m) or tension (N) of a tendon.
     distance
         Root-mean-square distance of the target's points from their goals, m.
     max_distance

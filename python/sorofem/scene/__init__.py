@@ -58,15 +58,22 @@ Schema
     load_steps = 1             # equal load increments (the solver may cut a step back)
     max_cutbacks = 8           # times a failed load step may be halved before the solve gives up
 
-    [[cable]]                  # optional: A cable of unilateral springs embedded in the mesh (sorofem.Cable):
-                               # points, or start + direction + length + divisions.
+    [[cable]]                  # optional: A cable embedded in the mesh (sorofem.Cable): a chain of unilateral
+                               # springs (model = "springs": stiffness, actuation) or a sliding tendon (model =
+                               # "tendon": pull or tension); points, or start + direction + length + divisions.
     # points = [[0, 0.01, 0.01], [0.2, 0.01, 0.01], [0.4, 0.01, 0.01]]   # the cable's points at rest, m
     start = [0, 0.01, 0.01]    # first point of a straight cable, m
     direction = [1, 0, 0]      # direction of a straight cable (any non-zero length)
     length = 0.4               # length of a straight cable, m
     divisions = 10             # equal segments of a straight cable
-    stiffness = 100e3          # stiffness of each segment spring, N/m; required
-    actuation = 0.8            # alpha: segment rest lengths are scaled by it (1 rest, < 1 pulled) (default 1)
+    model = "springs"          # a chain of unilateral springs bonded to the body, or an inextensible tendon
+                               # sliding through its points (the last one tied) with one tension
+    stiffness = 100e3          # stiffness of each segment spring (springs: required), N/m
+    actuation = 0.8            # springs: alpha, segment rest lengths are scaled by it (1 rest, < 1 pulled)
+                               # (default 1)
+    # pull = 0.01              # tendon: pulled length, the tendon is held at L <= L0 - pull (exactly one of pull
+                               # and tension), m
+    # tension = 2              # tendon: tension (exactly one of pull and tension), N
     transition = 0.001         # width of the smooth slack-taut transition, fraction of a segment's rest length
     anchor_first = false       # the first point is fixed in the world (a motor)
     snap_tolerance = 0         # points this far outside the mesh attach to the nearest tet, m
@@ -101,9 +108,10 @@ Schema
     save_every = 1             # write a frame every this many steps (plus the first and last)
     initial = "rest"           # start at rest from the rest shape, or from the static equilibrium (loads,
                                # actuations)
-    actuation = [[[0, 1], [0.5, 0.8]]]   # one array of [time, alpha] keyframes per [[cable]], linearly
-                                         # interpolated and held outside their range (default: each cable keeps
-                                         # its actuation), s, -
+    actuation = [[[0, 1], [0.5, 0.8]]]   # one array of [time, value] keyframes per [[cable]], linearly
+                                         # interpolated and held outside their range: alpha (springs, > 0), pull
+                                         # in m or tension in N (tendons, as commanded) (default: each cable keeps
+                                         # its command), s, -
 
     [target]                   # optional: Where parts of the body should be (sorofem.Target), for sorofem
                                # estimate / control: exactly one of nodes, points or surface; nodes and points
@@ -128,10 +136,11 @@ Schema
     method = "least-squares"   # optimiser
     starts = 0                 # number of extra random starts
 
-    [control]                  # optional: sorofem control (sorofem.control): find cable actuations that bring
-                               # [target] closest.
+    [control]                  # optional: sorofem control (sorofem.control): find cable commands (alphas, tendon
+                               # pulls or tensions) that bring [target] closest.
     cables = [0]               # indices of the [[cable]] entries to actuate (default: all)
-    bounds = [[0.3, 1]]        # one actuation range [lo, hi] per cable (default [0.3, 1])
+    bounds = [[0.3, 1]]        # one range [lo, hi] per cable in its command's units: alpha (springs, > 0; default
+                               # [0.3, 1]), pull in m (default [0, L0/4]) or tension in N (required)
     method = "l-bfgs-b"        # optimiser
 
     [output]                   # optional: What sorofem run writes and where (every file but deformed.vtu is on by

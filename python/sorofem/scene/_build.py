@@ -273,6 +273,8 @@ def apply_cables(check: Checker, entries: list[dict[str, Any]], body: Body) -> l
     for i, entry in enumerate(entries):
         prefix = f"cable[{i}]"
         options = {name: entry[name] for name in CABLE_OPTIONS}
+        if entry["model"] == "tendon" and (entry["pull"] is None) == (entry["tension"] is None):
+            raise check.error(f"{prefix}.pull", "a tendon needs exactly one of pull (m) and tension (N)")
         try:
             if "points" in entry:
                 cable = Cable(entry["points"], **options)
@@ -304,7 +306,7 @@ def build_dynamics(check: Checker, table: dict[str, Any], body: Body) -> dict[st
         if len(schedule) != n_cables:
             raise check.error(
                 "dynamics.actuation",
-                f"expected one list of [time, alpha] keyframes per [[cable]] ({n_cables}), got {len(schedule)} entries",
+                f"expected one list of [time, value] keyframes per [[cable]] ({n_cables}), got {len(schedule)} entries",
             )
         options["actuation"] = []
         for c, frames in enumerate(schedule):
@@ -312,6 +314,15 @@ def build_dynamics(check: Checker, table: dict[str, Any], body: Body) -> dict[st
                 options["actuation"].append(Keyframes(frames))
             except InputError as exc:
                 raise check.error(f"dynamics.actuation[{c}]", str(exc)) from None
+            values = [value for _, value in frames]
+            kind = body.commands[c][0]
+            if kind == "actuation" and min(values) <= 0:
+                raise check.error(f"dynamics.actuation[{c}]", f"alphas must be > 0, got {min(values):g}")
+            if kind == "tension" and min(values) < 0:
+                raise check.error(f"dynamics.actuation[{c}]", f"tensions must be >= 0 N, got {min(values):g}")
+            if kind == "pull" and max(values) >= body.cables[c].length:
+                raise check.error(f"dynamics.actuation[{c}]", f"pulls must stay below the tendon's rest length "
+                                  f"{body.cables[c].length:.6g} m, got {max(values):g} m")
     return options
 
 
@@ -436,8 +447,23 @@ def build_control(check: Checker, table: dict[str, Any], body: Body) -> dict[str
             raise check.error("control.cables", "a cable is listed twice")
     else:
         cables = list(range(n))
+    bounds = _bounds(check, table["bounds"], "control.bounds", len(cables), "cable")
+    kinds = [body.commands[c][0] for c in cables]
+    for c, kind, pair in zip(cables, kinds, bounds or [None] * len(cables)):
+        if pair is None:
+            if kind == "tension":
+                raise check.error("control.bounds", f"cable {c} is a tendon driven by its tension: give its [lo, hi] in N")
+            continue
+        lo, hi = pair
+        if kind == "actuation" and lo <= 0:
+            raise check.error("control.bounds", f"cable {c}: an alpha range needs lo > 0, got [{lo:g}, {hi:g}]")
+        if kind == "tension" and lo < 0:
+            raise check.error("control.bounds", f"cable {c}: a tension range needs lo >= 0 N, got [{lo:g}, {hi:g}]")
+        if kind == "pull" and hi >= body.cables[c].length:
+            raise check.error("control.bounds", f"cable {c}: a pull range must stay below the tendon's rest length "
+                                                f"{body.cables[c].length:.6g} m, got hi = {hi:g} m")
     return {
         "cables": cables,
-        "bounds": _bounds(check, table["bounds"], "control.bounds", len(cables), "cable"),
+        "bounds": bounds,
         "method": table["method"],
     }

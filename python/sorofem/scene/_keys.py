@@ -19,7 +19,7 @@ from typing import Any
 
 from .._validate import MAX_CABLE_DIVISIONS, MAX_STARTS, MAX_TIME_STEPS, Range
 from ..body import FORMULATIONS, PRESSURE_MASSES, VOLUMETRIC_MEASURES, Body
-from ..cables import OUTSIDE_MODES, Cable
+from ..cables import CABLE_MODELS, OUTSIDE_MODES, Cable
 from ..inverse import parameter_names
 from ..materials import DENSITY, MODELS, NEO_HOOKEAN, MaterialModel, Parameter
 from ..mesh import Mesh
@@ -265,8 +265,8 @@ _CABLE_DEFAULTS = {
     name: p.default for name, p in inspect.signature(Cable.__init__).parameters.items() if p.default is not p.empty
 }
 #: The [[cable]] keys that are keyword arguments of sorofem.Cable (the others place the points).
-CABLE_OPTIONS = ("stiffness", "actuation", "transition", "anchor_first", "snap_tolerance", "outside", "free_node_mass",
-                 "damping")
+CABLE_OPTIONS = ("model", "stiffness", "actuation", "pull", "tension", "transition", "anchor_first", "snap_tolerance",
+                 "outside", "free_node_mass", "damping")
 
 _CABLE = Table(
     {
@@ -276,10 +276,17 @@ _CABLE = Table(
         "direction": Field(_VEC3, "direction of a straight cable (any non-zero length)", example=[1, 0, 0]),
         "length": Field(Number(Range(gt=0)), "length of a straight cable", "m", example=0.4),
         "divisions": Field(Integer(ge=1, le=MAX_CABLE_DIVISIONS), "equal segments of a straight cable", example=10),
-        "stiffness": Field(Number(Range(gt=0)), "stiffness of each segment spring", "N/m", required=True,
-                           missing="the stiffness of each segment, N/m", example=1e5),
-        "actuation": Field(Number(Range(gt=0)), "alpha: segment rest lengths are scaled by it (1 rest, < 1 pulled)",
-                           default=_CABLE_DEFAULTS["actuation"], example=0.8),
+        "model": Field(String(CABLE_MODELS), "a chain of unilateral springs bonded to the body, or an inextensible "
+                       "tendon sliding through its points (the last one tied) with one tension",
+                       default=_CABLE_DEFAULTS["model"]),
+        "stiffness": Field(Number(Range(gt=0)), "stiffness of each segment spring (springs: required)", "N/m",
+                           default=None, example=1e5),
+        "actuation": Field(Number(Range(gt=0)), "springs: alpha, segment rest lengths are scaled by it (1 rest, < 1 "
+                           "pulled)", default=_CABLE_DEFAULTS["actuation"], example=0.8),
+        "pull": Field(Number(), "tendon: pulled length, the tendon is held at L <= L0 - pull (exactly one of pull "
+                      "and tension)", "m", default=None, example=0.01, commented=True),
+        "tension": Field(Number(Range(ge=0)), "tendon: tension (exactly one of pull and tension)", "N", default=None,
+                         example=2.0, commented=True),
         "transition": Field(Number(Range(gt=0, lt=1)), "width of the smooth slack-taut transition, fraction of a "
                             "segment's rest length", default=_CABLE_DEFAULTS["transition"]),
         "anchor_first": Field(Boolean(), "the first point is fixed in the world (a motor)",
@@ -294,8 +301,9 @@ _CABLE = Table(
                          "integration (static solves are unaffected)", "N s/m", default=_CABLE_DEFAULTS["damping"]),
     },
     choices=(Choice((Group(("points",)), Group(("start", "direction", "length", "divisions")))),),
-    doc="A cable of unilateral springs embedded in the mesh (sorofem.Cable): points, or start + direction + length "
-    "+ divisions.",
+    doc="A cable embedded in the mesh (sorofem.Cable): a chain of unilateral springs (model = \"springs\": "
+    "stiffness, actuation) or a sliding tendon (model = \"tendon\": pull or tension); points, or start + direction "
+    "+ length + divisions.",
 )
 
 _OBSTACLE = Table(
@@ -379,10 +387,11 @@ _DYNAMICS = Table(
         "initial": Field(String(("rest", "static")), "start at rest from the rest shape, or from the static "
                          "equilibrium (loads, actuations)", default="rest"),
         "actuation": Field(
-            Array(Array(Tuple((Number(), Number(Range(gt=0))), "[time, alpha]"), 1, noun="[time, alpha] pairs"),
+            Array(Array(Tuple((Number(), Number()), "[time, value]"), 1, noun="[time, value] pairs"),
                   indexed=True),
-            "one array of [time, alpha] keyframes per [[cable]], linearly interpolated and held outside their "
-            "range (default: each cable keeps its actuation)",
+            "one array of [time, value] keyframes per [[cable]], linearly interpolated and held outside their "
+            "range: alpha (springs, > 0), pull in m or tension in N (tendons, as commanded) (default: each cable "
+            "keeps its command)",
             "s, -", default=None, example=[[[0.0, 1.0], [0.5, 0.8]]],
         ),
     },
@@ -443,12 +452,14 @@ _CONTROL = Table(
     {
         "cables": Field(Array(Integer(ge=0), 1), "indices of the [[cable]] entries to actuate (default: all)",
                         default=None, example=[0]),
-        "bounds": Field(Array(Tuple((Number(Range(gt=0)), Number(Range(gt=0))), "[lo, hi]"), 1),
-                        "one actuation range [lo, hi] per cable (default [0.3, 1])", default=None,
+        "bounds": Field(Array(Tuple((Number(), Number()), "[lo, hi]"), 1),
+                        "one range [lo, hi] per cable in its command's units: alpha (springs, > 0; default [0.3, 1]), "
+                        "pull in m (default [0, L0/4]) or tension in N (required)", default=None,
                         example=[[0.3, 1.0]]),
         "method": Field(String(("l-bfgs-b", "nelder-mead")), "optimiser", default="l-bfgs-b"),
     },
-    doc="sorofem control (sorofem.control): find cable actuations that bring [target] closest.",
+    doc="sorofem control (sorofem.control): find cable commands (alphas, tendon pulls or tensions) that bring "
+    "[target] closest.",
 )
 
 #: The files `sorofem run` writes, each switchable in [output] (defaults: all of them).

@@ -541,7 +541,10 @@ class View:
         if self.move_steps:
             lines.append(f"last slider move: {self.move_steps} alpha step(s), {self.move_iterations} Newton iterations")
         for c, tension in enumerate(r.cable_tensions):
-            lines.append(f"cable {c}: alpha {r.actuations[c]:.3f}, tension {tension.min():.3g} .. {tension.max():.3g} N")
+            if r.cable_tension[c] is not None:
+                lines.append(f"cable {c} (tendon): tension {r.cable_tension[c]:.3g} N, pull {r.cable_pull[c] * 1e3:.3g} mm")
+            else:
+                lines.append(f"cable {c}: alpha {r.actuations[c]:.3f}, tension {tension.min():.3g} .. {tension.max():.3g} N")
         if self.dragged is not None:
             lines.append(f"pulling node {self.dragged} with {np.linalg.norm(self.drag_force):.3g} N")
         return "  \n".join(lines)
@@ -646,6 +649,8 @@ def build_view(
     view.formulation = gui.add_dropdown("formulation", list(FORMULATIONS), initial_value=body.formulation)
     view.formulation.on_update(lambda event: view.set_formulation(event.target.value))
     for c, alpha in enumerate(body.actuations):
+        if body.cables[c].is_tendon:
+            continue  # alpha sliders drive spring cables; a tendon's pull or tension shows in the summary
         slider = gui.add_slider(
             f"cable {c} alpha", min=min(alpha_range[0], alpha), max=max(alpha_range[1], alpha),
             step=ALPHA_STEP, initial_value=float(alpha), hint="1 = rest length, < 1 = pulled",

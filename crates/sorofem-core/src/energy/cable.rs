@@ -37,6 +37,17 @@ pub struct PointMap {
     pub weights: Vec<f64>,
 }
 
+impl PointMap {
+    /// The point's position (m) given the full DOF vector `z`.
+    pub fn position(&self, z: &[f64]) -> Vector3<f64> {
+        let mut y = Vector3::from(self.offset);
+        for (&b, &w) in self.dof_blocks.iter().zip(&self.weights) {
+            y += w * Vector3::new(z[b], z[b + 1], z[b + 2]);
+        }
+        y
+    }
+}
+
 /// One cable: its points, per-segment rest lengths (m), stiffness (N/m), actuation and
 /// transition width (fraction of the rest length).
 #[derive(Clone, Debug)]
@@ -72,12 +83,7 @@ impl Cable {
 
     /// Current position of point `k` given the full DOF vector.
     pub fn position(&self, k: usize, z: &[f64]) -> Vector3<f64> {
-        let p = &self.points[k];
-        let mut y = Vector3::from(p.offset);
-        for (&b, &w) in p.dof_blocks.iter().zip(&p.weights) {
-            y += w * Vector3::new(z[b], z[b + 1], z[b + 2]);
-        }
-        y
+        self.points[k].position(z)
     }
 
     /// Tension (N) of segment `k` at the full DOF vector `z`.
@@ -94,6 +100,10 @@ pub struct CableTerm {
     pub cables: Vec<Cable>,
     /// (cable, segment) of each element.
     segments: Vec<(usize, usize)>,
+    /// Index of each cable among all the model's cables (springs and tendons), where its
+    /// parameters sit in the `cable_*` parameter blocks, and the number of those cables.
+    param_index: Vec<usize>,
+    n_param_cables: usize,
     /// The time step (s) and each segment's length at its start (m) while a dynamic step is
     /// being solved; `None` in static solves.
     dashpot: Option<(f64, Vec<f64>)>,
@@ -101,6 +111,17 @@ pub struct CableTerm {
 
 impl CableTerm {
     pub fn new(cables: Vec<Cable>) -> Self {
+        let n = cables.len();
+        Self::with_param_index(cables, (0..n).collect(), n)
+    }
+
+    /// The cables of a model that also has other cables (tendons): `param_index[c]` is cable
+    /// c's index among all `n_param_cables` of them.
+    pub fn with_param_index(
+        cables: Vec<Cable>,
+        param_index: Vec<usize>,
+        n_param_cables: usize,
+    ) -> Self {
         let segments = cables
             .iter()
             .enumerate()
@@ -109,6 +130,8 @@ impl CableTerm {
         CableTerm {
             cables,
             segments,
+            param_index,
+            n_param_cables,
             dashpot: None,
         }
     }
@@ -135,43 +158,65 @@ impl CableTerm {
     fn endpoint_maps(&self, e: usize) -> ([Option<usize>; 8], [f64; 16]) {
         let (c, k) = self.segments[e];
         let cable = &self.cables[c];
-        let mut blocks = [None; 8];
-        // weights[end * 8 + slot]: weight of slot `slot` in endpoint `end`'s position.
-        let mut weights = [0.0; 16];
-        for (end, point) in [&cable.points[k], &cable.points[k + 1]]
-            .into_iter()
-            .enumerate()
-        {
-            for (slot, (&b, &w)) in point.dof_blocks.iter().zip(&point.weights).enumerate() {
-                blocks[end * 4 + slot] = Some(b);
-                weights[end * 8 + end * 4 + slot] = w;
-            }
-        }
-        (blocks, weights)
+        segment_maps(&cable.points[k], &cable.points[k + 1])
     }
-}
 
-impl CableTerm {
     /// Both endpoints' positions from segment `e`'s local DOFs (slot s holds `z[3 s..3 s + 3]`),
     /// and the padded weights of [`CableTerm::endpoint_maps`].
     fn endpoint_positions(&self, e: usize, z: &[f64]) -> ([Vector3<f64>; 2], [f64; 16]) {
         let (c, k) = self.segments[e];
         let cable = &self.cables[c];
         let (_, weights) = self.endpoint_maps(e);
-        let mut y = [
-            Vector3::from(cable.points[k].offset),
-            Vector3::from(cable.points[k + 1].offset),
-        ];
-        for (end, y_end) in y.iter_mut().enumerate() {
-            for slot in 0..8 {
-                let w = weights[end * 8 + slot];
-                if w != 0.0 {
-                    *y_end += w * Vector3::new(z[3 * slot], z[3 * slot + 1], z[3 * slot + 2]);
-                }
-            }
-        }
+        let y = segment_positions(&cable.points[k], &cable.points[k + 1], &weights, z);
         (y, weights)
     }
+}
+
+/// The stencil of a segment from point `p0` to `p1`: the DOF blocks of both endpoints, padded to
+/// `2 * MAX_BLOCKS` slots (`None` where a point has fewer), and `weights[end * 8 + slot]`, the
+/// weight of slot `slot` in endpoint `end`'s position (0 for the other endpoint's slots).
+pub(crate) fn segment_maps(p0: &PointMap, p1: &PointMap) -> ([Option<usize>; 8], [f64; 16]) {
+    let mut blocks = [None; 8];
+    let mut weights = [0.0; 16];
+    for (end, point) in [p0, p1].into_iter().enumerate() {
+        for (slot, (&b, &w)) in point.dof_blocks.iter().zip(&point.weights).enumerate() {
+            blocks[end * 4 + slot] = Some(b);
+            weights[end * 8 + end * 4 + slot] = w;
+        }
+    }
+    (blocks, weights)
+}
+
+/// The global DOFs of a segment's stencil (24): padding slots repeat a real DOF with weight 0
+/// so that every index is valid.
+pub(crate) fn segment_dofs(blocks: &[Option<usize>; 8], dofs: &mut [usize]) {
+    let fallback = blocks.iter().flatten().next().copied().unwrap_or(0);
+    for (slot, b) in blocks.iter().enumerate() {
+        let base = b.unwrap_or(fallback);
+        for i in 0..3 {
+            dofs[3 * slot + i] = base + i;
+        }
+    }
+}
+
+/// Both endpoints' positions (m) from a segment's local DOFs `z` (slot s holds
+/// `z[3 s..3 s + 3]`) and the weights of [`segment_maps`].
+pub(crate) fn segment_positions(
+    p0: &PointMap,
+    p1: &PointMap,
+    weights: &[f64; 16],
+    z: &[f64],
+) -> [Vector3<f64>; 2] {
+    let mut y = [Vector3::from(p0.offset), Vector3::from(p1.offset)];
+    for (end, y_end) in y.iter_mut().enumerate() {
+        for slot in 0..8 {
+            let w = weights[end * 8 + slot];
+            if w != 0.0 {
+                *y_end += w * Vector3::new(z[3 * slot], z[3 * slot + 1], z[3 * slot + 2]);
+            }
+        }
+    }
+    y
 }
 
 impl Term for CableTerm {
@@ -185,14 +230,7 @@ impl Term for CableTerm {
 
     fn element_dofs(&self, e: usize, dofs: &mut [usize]) {
         let (blocks, _) = self.endpoint_maps(e);
-        // Padding slots repeat a real DOF with weight 0 so that every index is valid.
-        let fallback = blocks.iter().flatten().next().copied().unwrap_or(0);
-        for (slot, b) in blocks.iter().enumerate() {
-            let base = b.unwrap_or(fallback);
-            for i in 0..3 {
-                dofs[3 * slot + i] = base + i;
-            }
-        }
+        segment_dofs(&blocks, dofs);
     }
 
     fn element(
@@ -346,14 +384,14 @@ impl CableTerm {
 
 impl ParamTerm for CableTerm {
     fn param_blocks(&self) -> Vec<(String, usize)> {
-        let n = self.cables.len();
+        let n = self.n_param_cables;
         vec![("cable_actuation".into(), n), ("cable_stiffness".into(), n)]
     }
     fn element_param_count(&self) -> usize {
         2
     }
     fn element_params(&self, e: usize, params: &mut [(usize, usize)]) {
-        let c = self.cable_of(e);
+        let c = self.param_index[self.cable_of(e)];
         params.copy_from_slice(&[(0, c), (1, c)]);
     }
     fn element_param_gradient(&self, e: usize, z: &[f64], out: &mut [f64]) {

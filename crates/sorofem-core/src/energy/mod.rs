@@ -8,10 +8,12 @@ pub mod cable;
 pub mod elastic;
 pub mod loads;
 pub mod pressure_iterates;
+pub mod tendon;
 
 pub use cable::{Cable, CableTerm, PointMap};
 pub use elastic::{ElasticTerm, Formulation, PressureMass};
 pub use loads::{GravityTerm, LumpedMass, NodalForceTerm, PointGravityTerm};
+pub use tendon::{Tendon, TendonCommand, TendonTerm};
 
 use crate::material::{Mat3, Tangent};
 use nalgebra::Vector3;

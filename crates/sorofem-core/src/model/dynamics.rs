@@ -2,10 +2,13 @@
 //! through the same Newton solver as statics (docs/theory.md, "Dynamics", has the equations,
 //! the step methods and their measured accuracy).
 
+use super::statics::infeasible_pulls;
 use super::system::{ContactSolve, FactorReuse, FrictionLag, StepTerms, System};
 use super::{Loads, Model};
+use crate::cables::CableSlot;
 use crate::contact::ccd::DEFAULT_MIN_SEPARATION;
 use crate::contact::ContactForces;
+use crate::energy::TendonCommand;
 use crate::error::{Error, Result};
 use crate::newton::{self, NewtonOptions};
 use crate::report::{SolveReport, Timings};
@@ -98,6 +101,9 @@ pub struct Trajectory {
     /// Node positions (m, 3 n) per saved frame.
     pub positions: Vec<Vec<f64>>,
     pub cable_points: Vec<Vec<Vec<[f64; 3]>>>,
+    /// Per saved frame, each tendon's tension (N) and pull (m) (`None` for spring cables).
+    pub tendon_tensions: Vec<Vec<Option<f64>>>,
+    pub tendon_pulls: Vec<Vec<Option<f64>>>,
     /// Kinetic energy (J) per saved frame.
     pub kinetic_energy: Vec<f64>,
     /// Node velocities (m/s, 3 n) at the end.
@@ -211,9 +217,11 @@ impl Model {
     /// / h + Pi(u) + beta_K / h (Pi_int(u) - F(u_n) . u)` (lumped mass M, Rayleigh damping
     /// alpha_M and beta_K), then `v = (u - u_n) / h`. Each step starts Newton from the
     /// quadratic extrapolation of the last three states. A step whose solve fails is split in
-    /// two, up to six times. `actuation[s][c]` is cable c's alpha during step s. Starts from
-    /// `initial_positions` (3 n, m; default rest; free cable nodes and pressures then continue
-    /// from the last solve) at rest or with `initial_velocities` (3 n, m/s); a simulation that
+    /// two, up to six times. `actuation[s][c]` is cable c's command during step s: its alpha
+    /// (spring cables), its pull (m) or its tension (N) (tendons, whichever their command is).
+    /// A displacement-controlled tendon is an exact constraint of every step, as in statics,
+    /// whatever the step method. Starts from `initial_positions` (3 n, m; default rest; free
+    /// cable nodes and pressures then continue from the last solve) at rest or with `initial_velocities` (3 n, m/s); a simulation that
     /// starts where the last one ended (its final positions and velocities) continues it
     /// exactly (see `Continuation`).
     ///
@@ -256,8 +264,17 @@ impl Model {
         self.save_frame(setup, &state, 0.0, &mut trajectory);
         let mut time = 0.0;
         for (s, alphas) in actuation.iter().enumerate() {
-            for (c, &alpha) in alphas.iter().enumerate() {
-                self.set_actuation(c, alpha)?;
+            for (c, &value) in alphas.iter().enumerate() {
+                match self.cable_slot(c)? {
+                    CableSlot::Springs(_) => self.set_actuation(c, value)?,
+                    CableSlot::Tendon(_) => {
+                        let command = match self.tendon_command(c)? {
+                            TendonCommand::Pull(_) => TendonCommand::Pull(value),
+                            TendonCommand::Tension(_) => TendonCommand::Tension(value),
+                        };
+                        self.set_tendon_command(c, command)?;
+                    }
+                }
             }
             // Halve the step on failure: a queue of sub-steps that must add up to dt.
             let mut pending = vec![(dt, 0usize)];
@@ -486,9 +503,10 @@ impl Model {
         trajectory
             .positions
             .push((0..3 * n).map(|i| rest[i] + state.z[i]).collect());
-        trajectory
-            .cable_points
-            .push(self.terms.cables.points_at(&state.z));
+        let (points, _, tensions, pulls) = self.cable_states(&state.z);
+        trajectory.cable_points.push(points);
+        trajectory.tendon_tensions.push(tensions);
+        trajectory.tendon_pulls.push(pulls);
         trajectory.kinetic_energy.push(
             0.5 * (setup.mass.iter().zip(&state.velocity))
                 .map(|(m, v)| m * v * v)
@@ -542,6 +560,8 @@ impl Model {
             .terms
             .cables
             .begin_step(h + setup.damping.stiffness, &state.z);
+        problem.extend_state(&mut trial, true);
+        let start_tensions = trial[problem.constraints.offset..].to_vec();
         let outcome = rayon::scope(|_| match setup.method {
             StepMethod::LinearlyImplicit => {
                 let once = newton::single_iteration(&mut problem, &mut trial, &setup.newton);
@@ -565,6 +585,9 @@ impl Model {
             _ => newton::solve(&mut problem, &mut trial, &setup.newton),
         });
         problem.model.terms.cables.end_step();
+        let outcome =
+            outcome.map_err(|error| infeasible_pulls(error, &problem.tendon_states(&trial)));
+        problem.finish_state(&mut trial, outcome.is_ok(), &start_tensions);
         if let Some(kept) = problem.reuse.take() {
             *reuse = kept;
         }
@@ -636,7 +659,8 @@ impl Model {
 
     /// The inertia and damping of a step of length `h` from `state` (`previous`: its free
     /// values). The stiffness damping's start force is the internal force at the step's start
-    /// with the step's actuation.
+    /// with the step's actuation; the tendons' forces are the motors', not the body's, and are
+    /// not damped (see `System::tendon_scale`).
     pub(super) fn step_terms(
         &self,
         setup: &StepSetup,
@@ -650,6 +674,13 @@ impl Model {
                 .assembler
                 .evaluate(&self.terms.internal(), &state.z, true, None)
                 .gradient;
+            let mut tendon_force = vec![0.0; state.z.len()];
+            for tendon in &self.terms.tendons.tendons {
+                tendon.add_length_gradient(&state.z, tendon.tension, &mut tendon_force);
+            }
+            for (f, &d) in force.iter_mut().zip(&setup.free) {
+                *f -= tendon_force[d];
+            }
             force.iter_mut().for_each(|f| *f *= beta_k / h);
             force[setup.n_displacement..].fill(0.0);
             force

@@ -11,6 +11,7 @@ pub mod dynamics;
 pub mod layout;
 pub mod statics;
 mod system;
+mod tendons;
 pub(crate) mod terms;
 
 pub use contact::ContactReport;
@@ -19,8 +20,11 @@ pub use layout::DofLayout;
 pub use statics::{Loads, Solution};
 
 use crate::assembly::{Assembler, Evaluation};
-use crate::cables::{embed, CableSpec, PointPlacement};
+use crate::cables::{
+    check_pull, check_tendon_command, embed, CableSlot, CableSpec, PointPlacement,
+};
 use crate::energy::elastic::PressureCompliance;
+use crate::energy::TendonCommand;
 pub use crate::energy::{Formulation as ElementFormulation, PressureMass};
 use crate::error::{check_finite, Error, Result};
 use crate::linear::{FactorKind, SparseFactor};
@@ -67,6 +71,9 @@ pub struct Model {
     /// Weight (Pa/m) of the volume-constraint residual rows (m^3) in the mixed residual norm,
     /// so that they are measured in N like the force rows: `mean(mu) / mean edge length`.
     pub(crate) pressure_weight: f64,
+    /// Weight `sigma` (N/m) of a tendon's constraint `g` (m) in the residual and in its active
+    /// set test `T + sigma g > 0`: `mean(mu) * mean edge length`, the stiffness of one element.
+    pub(crate) constraint_weight: f64,
     /// Free-node displacements and pressures of the last solve: a warm start's starting guess.
     pub(crate) last_extra: Option<Vec<f64>>,
     pub(crate) material_set: bool,
@@ -178,6 +185,7 @@ impl Model {
             factor: factor?,
             hessian_scratch: Default::default(),
             pressure_weight: 1.0,
+            constraint_weight: 1.0,
             last_extra: None,
             continuation: None,
             material_set: false,
@@ -234,11 +242,11 @@ impl Model {
     /// Rest length of each segment of each cable (m), between the points the cable is attached
     /// to (a snapped point sits on the mesh, not where the user put it).
     pub fn cable_rest_lengths(&self) -> Vec<Vec<f64>> {
-        self.terms
-            .cables
-            .cables
-            .iter()
-            .map(|c| c.rest_lengths.clone())
+        (self.terms.slots.iter())
+            .map(|slot| match *slot {
+                CableSlot::Springs(i) => self.terms.cables.cables[i].rest_lengths.clone(),
+                CableSlot::Tendon(i) => self.terms.tendons.tendons[i].rest_lengths.clone(),
+            })
             .collect()
     }
 
@@ -247,23 +255,36 @@ impl Model {
         &self.terms.placements
     }
 
+    /// Number of cables, spring chains and tendons.
     pub fn n_cables(&self) -> usize {
-        self.terms.cables.cables.len()
+        self.terms.slots.len()
     }
 
-    /// Cable `cable` for modification (callers invalidate the last solution when they change it).
-    fn cable_mut(&mut self, cable: usize) -> Result<&mut crate::energy::Cable> {
-        let len = self.n_cables();
+    /// Where cable `cable` lives, or `Err` naming it when out of range.
+    pub fn cable_slot(&self, cable: usize) -> Result<CableSlot> {
         self.terms
-            .cables
-            .cables
-            .get_mut(cable)
+            .slots
+            .get(cable)
+            .copied()
             .ok_or_else(|| Error::IndexOutOfRange {
                 param: "cable".into(),
                 position: 0,
                 index: cable as i64,
-                len,
+                len: self.terms.slots.len(),
             })
+    }
+
+    /// Spring chain `cable` for modification (callers invalidate the last solution when they
+    /// change it); `Err` for a tendon, naming `what` it does not have.
+    fn cable_mut(&mut self, cable: usize, what: &str) -> Result<&mut crate::energy::Cable> {
+        match self.cable_slot(cable)? {
+            CableSlot::Springs(i) => Ok(&mut self.terms.cables.cables[i]),
+            CableSlot::Tendon(_) => Err(Error::invalid(
+                "cable",
+                format!("a spring cable (a tendon has no {what}: set its pull or tension)"),
+                format!("cable {cable}, a tendon"),
+            )),
+        }
     }
 
     /// Sets cable `cable`'s actuation alpha (> 0; 1 = rest length, < 1 = pulled).
@@ -275,7 +296,7 @@ impl Model {
                 actuation,
             ));
         }
-        let target = self.cable_mut(cable)?;
+        let target = self.cable_mut(cable, "actuation")?;
         if target.actuation != actuation {
             target.actuation = actuation;
             self.last_state = None;
@@ -292,12 +313,45 @@ impl Model {
                 stiffness,
             ));
         }
-        let target = self.cable_mut(cable)?;
+        let target = self.cable_mut(cable, "stiffness")?;
         if target.stiffness != stiffness {
             target.stiffness = stiffness;
             self.last_state = None;
         }
         Ok(())
+    }
+
+    /// Sets tendon `cable`'s command: a pull (m, shorter than its rest length) or a tension
+    /// (N, >= 0). A tendon's tension from the last solve stays the next solve's starting
+    /// multiplier (warm starts of a pull continuation).
+    pub fn set_tendon_command(&mut self, cable: usize, command: TendonCommand) -> Result<()> {
+        let CableSlot::Tendon(i) = self.cable_slot(cable)? else {
+            return Err(Error::invalid(
+                "cable",
+                "a tendon (a spring cable is driven by its actuation alpha)",
+                format!("cable {cable}, a spring cable"),
+            ));
+        };
+        check_tendon_command(cable, command)?;
+        let tendon = &mut self.terms.tendons.tendons[i];
+        check_pull(cable, command, tendon.rest_length())?;
+        if tendon.command != command {
+            tendon.command = command;
+            self.last_state = None;
+        }
+        Ok(())
+    }
+
+    /// Tendon `cable`'s command.
+    pub fn tendon_command(&self, cable: usize) -> Result<TendonCommand> {
+        match self.cable_slot(cable)? {
+            CableSlot::Tendon(i) => Ok(self.terms.tendons.tendons[i].command),
+            CableSlot::Springs(_) => Err(Error::invalid(
+                "cable",
+                "a tendon",
+                format!("cable {cable}, a spring cable"),
+            )),
+        }
     }
 
     /// Sets a Neo-Hookean material (with the constructor's volumetric measure): per-tet `mu > 0`,
@@ -384,13 +438,13 @@ impl Model {
             elastic.material() != model || elastic.params() != flat || mass.density != density;
         elastic.set_material(model, flat);
         mass.density = density.to_vec();
+        let mean_shear = shear / m as f64;
+        let mean_edge =
+            (self.mesh.volumes().iter().sum::<f64>() / m as f64 * 6.0 * 2f64.sqrt()).cbrt();
         if mixed {
-            let m = m as f64;
-            let mean_shear = shear / m;
-            let mean_edge =
-                (self.mesh.volumes().iter().sum::<f64>() / m * 6.0 * 2f64.sqrt()).cbrt();
             self.pressure_weight = mean_shear / mean_edge;
         }
+        self.constraint_weight = mean_shear * mean_edge;
         // New parameters make the last solution (and any factorisation at it) stale: sensitivities
         // then need a new solve rather than silently mixing old positions with new parameters.
         self.material_set = true;

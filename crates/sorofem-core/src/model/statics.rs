@@ -3,7 +3,8 @@
 use super::contact::ContactReport;
 use super::system::{ContactSolve, FrictionLag, System};
 use super::Model;
-use crate::energy::HessianMode;
+use crate::cables::CableSlot;
+use crate::energy::{HessianMode, Term};
 use crate::error::{check_finite, Error, Result};
 use crate::material::{cauchy_stress, neo_hookean::von_mises};
 use crate::newton::{self, NewtonOptions};
@@ -26,8 +27,9 @@ const MAX_FRICTION_LAGS: usize = 4;
 
 /// An equilibrium: positions (m, 3 n node-major), nodal pressures (Pa, mixed only), the
 /// reaction force (N) at each fixed node (in the order they were given), the position (m) of
-/// every cable point and the tension (N) of every cable segment, the contact (with obstacles)
-/// and the report.
+/// every cable point and the tension (N) of every cable segment (a tendon's is the same on every
+/// segment), each tendon's tension (N) and pull `L0 - L` (m) (`None` for spring cables), the
+/// contact (with obstacles) and the report.
 #[derive(Clone, Debug)]
 pub struct Solution {
     pub positions: Vec<f64>,
@@ -35,6 +37,8 @@ pub struct Solution {
     pub reactions: Vec<[f64; 3]>,
     pub cable_points: Vec<Vec<[f64; 3]>>,
     pub cable_tensions: Vec<Vec<f64>>,
+    pub tendon_tensions: Vec<Option<f64>>,
+    pub tendon_pulls: Vec<Option<f64>>,
     pub contact: Option<ContactReport>,
     pub report: SolveReport,
 }
@@ -68,6 +72,8 @@ impl Model {
         let full_load = self.load_vector(loads);
         let prescribed = self.prescribed(loads);
         let mut problem = System::new(self, full_load, prescribed, None, options);
+        problem.extend_state(&mut z, initial.is_some());
+        let start_tensions = z[problem.constraints.offset..].to_vec();
         if problem.model.terms.contact.is_some() {
             let lag = FrictionLag::LoadStep { origin: None };
             problem.contact = Some(ContactSolve::new(lag, false));
@@ -77,32 +83,16 @@ impl Model {
         // The Newton loop runs on a worker of the thread pool: from the calling thread, its
         // single-threaded factorisations let the workers fall asleep and the element passes
         // after them ran slower (docs/theory.md, "Newton's method").
-        let mut report = rayon::scope(|_| newton::solve(&mut problem, &mut z, options))?;
-        if problem
-            .model
-            .terms
-            .contact
-            .as_ref()
-            .is_some_and(|c| c.has_friction())
-        {
-            let solve = problem.contact.as_mut().expect("contact");
-            let origin = solve.load_step_start.clone();
-            solve.friction = FrictionLag::LoadStep {
-                origin: Some(origin),
-            };
-            let again_options = NewtonOptions {
-                load_steps: 1,
-                ..options.clone()
-            };
-            for _ in 0..MAX_FRICTION_LAGS {
-                let again = rayon::scope(|_| newton::solve(&mut problem, &mut z, &again_options))?;
-                let done = again.iterations == 0;
-                absorb(&mut report, again);
-                if done {
-                    break;
-                }
+        let outcome = solve_with_friction_lags(&mut problem, &mut z, options);
+        let mut report = match outcome {
+            Ok(report) => report,
+            Err(error) => {
+                let error = infeasible_pulls(error, &problem.tendon_states(&z));
+                problem.finish_state(&mut z, false, &start_tensions);
+                return Err(error);
             }
-        }
+        };
+        problem.finish_state(&mut z, true, &start_tensions);
         let full_load = std::mem::take(&mut problem.full_load);
         let contact_solve = problem.contact.take();
         drop(problem);
@@ -134,8 +124,7 @@ impl Model {
             .pressure_offset()
             .map(|offset| z[offset..].to_vec());
         self.last_extra = Some(z[self.layout.extra()].to_vec());
-        let cable_points = self.terms.cables.points_at(&z);
-        let cable_tensions = self.terms.cables.tensions_at(&z);
+        let (cable_points, cable_tensions, tendon_tensions, tendon_pulls) = self.cable_states(&z);
         let contact = self.contact_report(&z, iterate_min_distances);
         z.truncate(3 * n);
         for (zi, ri) in z.iter_mut().zip(self.mesh.rest_flat()) {
@@ -147,9 +136,47 @@ impl Model {
             reactions,
             cable_points,
             cable_tensions,
+            tendon_tensions,
+            tendon_pulls,
             contact,
             report,
         })
+    }
+
+    /// Per cable at the full DOF vector `z`: its points (m), its segments' tensions (N), and for
+    /// a tendon its tension (N) and pull (m).
+    #[allow(clippy::type_complexity)]
+    pub(crate) fn cable_states(
+        &self,
+        z: &[f64],
+    ) -> (
+        Vec<Vec<[f64; 3]>>,
+        Vec<Vec<f64>>,
+        Vec<Option<f64>>,
+        Vec<Option<f64>>,
+    ) {
+        let springs_points = self.terms.cables.points_at(z);
+        let springs_tensions = self.terms.cables.tensions_at(z);
+        let mut out = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for slot in &self.terms.slots {
+            match *slot {
+                CableSlot::Springs(i) => {
+                    out.0.push(springs_points[i].clone());
+                    out.1.push(springs_tensions[i].clone());
+                    out.2.push(None);
+                    out.3.push(None);
+                }
+                CableSlot::Tendon(i) => {
+                    let tendon = &self.terms.tendons.tendons[i];
+                    out.0
+                        .push(tendon.points.iter().map(|p| p.position(z).into()).collect());
+                    out.1.push(vec![tendon.tension; tendon.n_segments()]);
+                    out.2.push(Some(tendon.tension));
+                    out.3.push(Some(tendon.pull(z)));
+                }
+            }
+        }
+        out
     }
 
     /// Checks `loads` against the model: finite values, node indices in range, one prescribed
@@ -251,6 +278,43 @@ impl Model {
         Ok((j, vm))
     }
 
+    /// Strain energy (J) of the elastic term at `positions` (3 n, m): the energy stored in the
+    /// body (standard formulation; in the mixed one, the saddle-point energy at the last
+    /// solve's pressures).
+    pub fn strain_energy(&self, positions: &[f64]) -> Result<f64> {
+        let n = self.mesh.n_nodes();
+        if positions.len() != 3 * n {
+            return Err(Error::shape(
+                "positions",
+                format!("({n}, 3)"),
+                format!("{} values", positions.len()),
+            ));
+        }
+        check_finite("positions", positions)?;
+        let mut z = vec![0.0; self.layout.n_full()];
+        for (zi, (x, r)) in z
+            .iter_mut()
+            .zip(positions.iter().zip(self.mesh.rest_flat()))
+        {
+            *zi = x - r;
+        }
+        if let Some(extra) = &self.last_extra {
+            z[self.layout.extra()].copy_from_slice(extra);
+        }
+        let term = &self.terms.elastic;
+        let s = term.stencil_size();
+        let (mut dofs, mut local) = (vec![0; s], vec![0.0; s]);
+        let mut energy = 0.0;
+        for e in 0..term.n_elements() {
+            term.element_dofs(e, &mut dofs);
+            for (v, &d) in local.iter_mut().zip(&dofs) {
+                *v = z[d];
+            }
+            energy += term.element(e, &local, None, None, HessianMode::Exact);
+        }
+        Ok(energy)
+    }
+
     /// Seconds of each of `repeats` numeric factorisations of the exact Hessian at the last
     /// static solution (the rest state before any solve), with nothing running beside them: the
     /// bare cost a Newton iteration is measured against. A diagnostic for benchmarks.
@@ -277,6 +341,69 @@ impl Model {
                 .collect()
         })
     }
+}
+
+/// A failed solve with displacement-controlled tendons: says which pulls the body could not
+/// reach. `tendons` holds `(cable, commanded pull, pull, tension)` at the last equilibrium the
+/// solver reached (the start of the increment that failed).
+pub(super) fn infeasible_pulls(error: Error, tendons: &[(usize, f64, f64, f64)]) -> Error {
+    let Error::NotConverged { message, report } = error else {
+        return error;
+    };
+    let short: Vec<String> = (tendons.iter())
+        .filter(|&&(_, commanded, reached, _)| commanded > 0.0 && reached < commanded)
+        .map(|&(cable, commanded, reached, tension)| {
+            format!(
+                "cable {cable} commanded {commanded:.4e} m, reached {reached:.4e} m at {tension:.4e} N"
+            )
+        })
+        .collect();
+    if short.is_empty() {
+        return Error::NotConverged { message, report };
+    }
+    Error::NotConverged {
+        message: format!(
+            "the tendon pull is infeasible: the body cannot shorten the tendon that much ({}); {message}",
+            short.join("; ")
+        ),
+        report,
+    }
+}
+
+/// Newton on the extended state `z`; with friction, solved again from each equilibrium
+/// (see [`MAX_FRICTION_LAGS`]) and the records joined.
+fn solve_with_friction_lags(
+    problem: &mut System,
+    z: &mut Vec<f64>,
+    options: &NewtonOptions,
+) -> Result<SolveReport> {
+    let mut report = rayon::scope(|_| newton::solve(problem, z, options))?;
+    if problem
+        .model
+        .terms
+        .contact
+        .as_ref()
+        .is_some_and(|c| c.has_friction())
+    {
+        let solve = problem.contact.as_mut().expect("contact");
+        let origin = solve.load_step_start.clone();
+        solve.friction = FrictionLag::LoadStep {
+            origin: Some(origin),
+        };
+        let again_options = NewtonOptions {
+            load_steps: 1,
+            ..options.clone()
+        };
+        for _ in 0..MAX_FRICTION_LAGS {
+            let again = rayon::scope(|_| newton::solve(problem, z, &again_options))?;
+            let done = again.iterations == 0;
+            absorb(&mut report, again);
+            if done {
+                break;
+            }
+        }
+    }
+    Ok(report)
 }
 
 /// Appends the record of a further solve from where `report`'s ended (a friction lag).

@@ -1,15 +1,22 @@
 //! The Newton view of a model: its registry's terms plus the loads at a load factor (and, for a
 //! time step, the inertia and damping), with the merit, directions and auxiliary iterates that
 //! [`crate::newton`] asks of it. Statics and dynamics both solve through it.
+//!
+//! Displacement-controlled tendons add their multipliers to the state ([`TendonConstraints`]):
+//! a solve's state is the full DOF vector followed by one tension per such tendon, and its
+//! residual the free DOFs' followed by one complementarity row per tendon.
 
+use super::tendons::TendonConstraints;
 use super::{Formulation, Model};
 use crate::contact::ccd::DEFAULT_MIN_SEPARATION;
 use crate::energy::pressure_iterates::{PressureIterates, PressureLinearisations};
-use crate::energy::HessianMode;
+use crate::energy::{HessianMode, TendonCommand};
 use crate::error::Result;
 use crate::newton::{AuxiliaryIterates, Merit, NewtonOptions, NewtonProblem};
 use crate::report::Timings;
 use std::time::Instant;
+
+mod tendon_state;
 
 /// The Newton view of a model at a load factor.
 pub(super) struct System<'a> {
@@ -32,6 +39,8 @@ pub(super) struct System<'a> {
     pressure_base: Vec<f64>,
     /// The model's Hessian scratch holds the exact Hessian at the state last evaluated.
     hessian_prepared: bool,
+    /// The displacement-controlled tendons, whose multipliers follow the full DOFs in the state.
+    pub(super) constraints: TendonConstraints,
     /// How this solve treats the model's contact, and what it measured (when there is contact).
     pub(super) contact: Option<ContactSolve>,
     /// Directions from a kept factorisation (dynamics), when set.
@@ -180,6 +189,9 @@ pub(crate) struct FactorReuse {
     pub(crate) max_ratio: f64,
     /// Directions computed with the kept factorisation.
     pub(crate) reused: usize,
+    /// Which displacement-controlled tendons were taut where it was factorised (see
+    /// `System::taut`): when the active set changes, the next direction refactorises.
+    pub(crate) taut: Vec<bool>,
 }
 
 impl FactorReuse {
@@ -190,6 +202,7 @@ impl FactorReuse {
             last_norm: None,
             max_ratio,
             reused: 0,
+            taut: Vec::new(),
         }
     }
 }
@@ -204,6 +217,11 @@ impl<'a> System<'a> {
     ) -> Self {
         let pressure_iterates =
             options.pressure_iterates && model.formulation == Formulation::Standard;
+        let constraints = TendonConstraints::new(
+            &model.terms.tendons,
+            model.layout.n_full(),
+            model.constraint_weight,
+        );
         System {
             model,
             full_load,
@@ -216,6 +234,7 @@ impl<'a> System<'a> {
             linearised_at_iterate: false,
             pressure_base: Vec::new(),
             hessian_prepared: false,
+            constraints,
             contact: None,
             reuse: None,
         }
@@ -320,28 +339,61 @@ impl System<'_> {
     }
 
     /// `-H^{-1} g` with the model's stored factorisation (in the mixed formulation `g`'s
-    /// pressure rows carry the pressure weight, which the solve takes back out).
-    fn solve_with_factor(&self, g: &[f64], timings: &mut Timings) -> Vec<f64> {
+    /// pressure rows carry the pressure weight, which the solve takes back out); with
+    /// displacement-controlled tendons, the bordered step of the extended state `z` through
+    /// that factorisation, the multipliers' increments appended. `None` when the bordered step
+    /// gives non-finite values.
+    fn solve_with_factor(&self, z: &[f64], g: &[f64], timings: &mut Timings) -> Option<Vec<f64>> {
         let t0 = Instant::now();
-        let mut d: Vec<f64> = g.iter().map(|v| -v).collect();
+        let n_free = self.model.assembler.n_free();
+        let mut d: Vec<f64> = g[..n_free].iter().map(|v| -v).collect();
         if self.is_mixed() {
             let n = self.n_nodes();
-            let len = d.len();
-            d[len - n..]
+            d[n_free - n..]
                 .iter_mut()
                 .for_each(|v| *v /= self.model.pressure_weight);
         }
+        // The constrained tendons' forces come out of the residual: the bordered step puts
+        // them back at their new multipliers.
+        let term = &self.model.terms.tendons;
+        let full = &z[..self.constraints.offset];
+        for (i, &tension) in self.constraints.multipliers(z).iter().enumerate() {
+            if tension != 0.0 {
+                let row = (self.constraints).jacobian_row(term, i, full, &self.model.assembler);
+                for (di, ri) in d.iter_mut().zip(row) {
+                    *di += tension * ri;
+                }
+            }
+        }
         self.model.factor.solve_in_place(&mut d);
+        if !self.constraints.is_empty() {
+            let model = &*self.model;
+            let step = (self.constraints).bordered_step(
+                &model.terms.tendons,
+                z,
+                &model.assembler,
+                &model.factor,
+                d,
+            );
+            let Some((dx, tensions)) = step else {
+                timings.solve += t0.elapsed().as_secs_f64();
+                return None;
+            };
+            d = dx;
+            let current = self.constraints.multipliers(z);
+            d.extend(tensions.iter().zip(current).map(|(new, old)| new - old));
+        }
         timings.solve += t0.elapsed().as_secs_f64();
-        d
+        Some(d)
     }
 
     /// Whether `d` may serve as a direction for gradient `g`: a descent direction of the energy
-    /// (standard formulation). No inertia test for the mixed formulation: the condensed
-    /// curvature `du^T A du + dp^T C dp` cancels catastrophically when the pressure (and so
-    /// `K_geo(p)`) is large; finite values only.
+    /// (energy merit). No inertia test for residual merits: for the mixed formulation the
+    /// condensed curvature `du^T A du + dp^T C dp` cancels catastrophically when the pressure
+    /// (and so `K_geo(p)`) is large, and a step constrained by tendons need not descend the
+    /// energy; finite values only.
     fn is_usable(&self, d: &[f64], g: &[f64]) -> bool {
-        if self.is_mixed() {
+        if self.merit() != Merit::Energy {
             d.iter().all(|v| v.is_finite())
         } else {
             d.iter().zip(g).map(|(a, b)| a * b).sum::<f64>() < 0.0
@@ -349,9 +401,11 @@ impl System<'_> {
     }
 
     /// A direction from the kept factorisation of [`FactorReuse`], when there is one, the
-    /// residual fell enough since the last direction and it gives a usable direction.
+    /// residual fell enough since the last direction, the same tendons are taut as where it was
+    /// factorised and it gives a usable direction.
     fn kept_direction(
         &mut self,
+        z: &[f64],
         g: &[f64],
         g_norm: f64,
         timings: &mut Timings,
@@ -362,11 +416,12 @@ impl System<'_> {
             .is_some_and(|last| g_norm > reuse.max_ratio * last);
         if slow
             || reuse.kept != Some(self.model.factor.generation())
+            || reuse.taut != self.taut(z)
             || reuse.contact_set != self.active_contacts()
         {
             return None;
         }
-        let d = self.solve_with_factor(g, timings);
+        let d = self.solve_with_factor(z, g, timings)?;
         let usable = self.is_usable(&d, g);
         let reuse = self.reuse.as_mut().expect("checked above");
         if !usable {
@@ -397,6 +452,9 @@ impl System<'_> {
             g[len - n..]
                 .iter_mut()
                 .for_each(|v| *v *= self.model.pressure_weight);
+        }
+        if self.merit() != Merit::Energy {
+            g.extend(self.constraints.residual_rows(&self.model.terms.tendons, z));
             if g.iter().any(|v| !v.is_finite()) {
                 return (f64::INFINITY, g);
             }
@@ -421,8 +479,11 @@ impl NewtonProblem for System<'_> {
     /// (the residual 10-fold) over the recent maximum, so that full Newton steps of the
     /// saddle-point system are accepted far from the solution, where the Armijo test on the
     /// residual would creep in 1/16 steps.
+    ///
+    /// Displacement-controlled tendons make the problem a saddle point too (the multipliers have
+    /// no energy to descend): the residual merit, with their complementarity rows.
     fn merit(&self) -> Merit {
-        if self.is_mixed() {
+        if self.is_mixed() || !self.constraints.is_empty() {
             Merit::Residual {
                 nonmonotone_factor: 100.0,
             }
@@ -446,6 +507,14 @@ impl NewtonProblem for System<'_> {
                 z[3 * node + k] = factor * u[k];
             }
         }
+        // The motors' commands are loads: pulls and tensions grow with the factor.
+        self.constraints.factor = factor;
+        let scale = self.tendon_scale();
+        for tendon in &mut self.model.terms.tendons.tendons {
+            if let TendonCommand::Tension(tension) = tendon.command {
+                tendon.tension = factor * tension * scale;
+            }
+        }
     }
 
     fn load_norm(&self) -> f64 {
@@ -457,22 +526,24 @@ impl NewtonProblem for System<'_> {
     /// so that they are forces too.
     fn merit_and_gradient(&mut self, z: &mut [f64]) -> (f64, Vec<f64>) {
         self.hessian_prepared = false;
-        let mut eval = self
-            .model
-            .assembler
-            .evaluate(&self.model.terms.internal(), z, true, None);
+        let full = self.full_dofs(z);
+        let mut eval =
+            self.model
+                .assembler
+                .evaluate(&self.model.terms.internal(), full, true, None);
         if eval.energy.is_finite() {
             self.scale_internal(&mut eval.energy, &mut eval.gradient, None);
-            eval.energy += self.add_contact(z, &mut eval.gradient, None);
+            eval.energy += self.add_contact(full, &mut eval.gradient, None);
         }
         self.merit_at(z, eval.energy, eval.gradient)
     }
 
     fn merit_gradient_and_hessian(&mut self, z: &mut [f64]) -> (f64, Vec<f64>) {
+        let full = self.full_dofs(z);
         let mut eval = std::mem::take(&mut self.model.hessian_scratch);
         self.model.assembler.evaluate_into(
             &self.model.terms.internal(),
-            z,
+            full,
             true,
             Some(HessianMode::Exact),
             &mut eval,
@@ -481,7 +552,7 @@ impl NewtonProblem for System<'_> {
             let mut gradient = std::mem::take(&mut eval.gradient);
             self.scale_internal(&mut eval.energy, &mut gradient, Some(&mut eval.hessian));
             eval.energy += self.add_contact(
-                z,
+                full,
                 &mut gradient,
                 Some((&mut eval.hessian, HessianMode::Exact)),
             );
@@ -502,7 +573,7 @@ impl NewtonProblem for System<'_> {
     ) -> Result<Option<Vec<f64>>> {
         let g_norm = g.iter().map(|v| v * v).sum::<f64>().sqrt();
         if !projected {
-            if let Some(d) = self.kept_direction(g, g_norm, timings) {
+            if let Some(d) = self.kept_direction(z, g, g_norm, timings) {
                 return Ok(Some(d));
             }
         }
@@ -512,11 +583,12 @@ impl NewtonProblem for System<'_> {
             HessianMode::Exact
         };
         let t0 = Instant::now();
+        let full = self.full_dofs(z);
         let mut eval = std::mem::take(&mut self.model.hessian_scratch);
         if !(self.hessian_prepared && mode == HessianMode::Exact) {
             self.model.assembler.evaluate_into(
                 &self.model.terms.internal(),
-                z,
+                full,
                 false,
                 Some(mode),
                 &mut eval,
@@ -524,7 +596,7 @@ impl NewtonProblem for System<'_> {
             self.take_recorded_linearisation();
             let mut hessian = std::mem::take(&mut eval.hessian);
             self.scale_internal(&mut 0.0, &mut [], Some(&mut hessian));
-            self.add_contact(z, &mut [], Some((&mut hessian, mode)));
+            self.add_contact(full, &mut [], Some((&mut hessian, mode)));
             eval.hessian = hessian;
         }
         self.hessian_prepared = false;
@@ -541,18 +613,20 @@ impl NewtonProblem for System<'_> {
         let ok = ok?;
         timings.factorization += seconds;
         timings.factorizations += 1;
+        let taut = self.taut(z);
         if let Some(reuse) = &mut self.reuse {
             reuse.kept = ok.then(|| self.model.factor.generation());
             reuse.contact_set = contact_set;
             reuse.last_norm = Some(g_norm);
+            reuse.taut = taut;
         }
         if !ok {
             timings.failed_factorization += seconds;
             timings.failed_factorizations += 1;
             return Ok(None);
         }
-        let d = self.solve_with_factor(g, timings);
-        let usable = self.is_usable(&d, g);
+        let d = self.solve_with_factor(z, g, timings);
+        let usable = d.as_ref().is_some_and(|d| self.is_usable(d, g));
         if !usable {
             timings.failed_factorization += seconds;
             timings.failed_factorizations += 1;
@@ -560,13 +634,22 @@ impl NewtonProblem for System<'_> {
                 reuse.kept = None;
             }
         }
-        Ok(usable.then_some(d))
+        Ok(d.filter(|_| usable))
     }
 
     fn step(&self, z: &mut [f64], d: &[f64], t: f64) {
-        for (&full, di) in self.model.assembler.full_of_free().iter().zip(d) {
+        let free = self.model.assembler.full_of_free();
+        for (&full, di) in free.iter().zip(d) {
             z[full] += t * di;
         }
+        let offset = self.constraints.offset;
+        for (i, di) in d[free.len()..].iter().enumerate() {
+            z[offset + i] += t * di;
+        }
+    }
+
+    fn constraints_met(&self, z: &[f64]) -> bool {
+        self.constraints.met(&self.model.terms.tendons, z)
     }
 
     /// No mesh node may move farther than the rest mesh's bounding-box diagonal in one step:
@@ -595,7 +678,8 @@ impl NewtonProblem for System<'_> {
                     dz[full] = bound * di;
                 }
             }
-            bound *= term.max_step(z, &dz, DEFAULT_MIN_SEPARATION);
+            let full = &z[..self.constraints.offset];
+            bound *= term.max_step(full, &dz, DEFAULT_MIN_SEPARATION);
             solve.seconds += t0.elapsed().as_secs_f64();
         }
         bound
@@ -619,7 +703,7 @@ impl NewtonProblem for System<'_> {
 impl AuxiliaryIterates for System<'_> {
     fn start(&mut self, z: &[f64]) {
         if self.contact.is_some() {
-            self.start_contact(z);
+            self.start_contact(&z[..self.constraints.offset]);
         }
         if self.pressure_iterates {
             self.pressure_base = self.model.terms.elastic.pressures_at(z);

@@ -6,11 +6,11 @@
 use super::layout::DofLayout;
 use super::statics::Loads;
 use super::Formulation;
-use crate::cables::{CableSpec, EmbeddedCables, PointPlacement};
+use crate::cables::{CableSlot, CableSpec, EmbeddedCables, PointPlacement};
 use crate::contact::ContactTerm;
 use crate::energy::{
     CableTerm, ElasticTerm, Formulation as ElementFormulation, GravityTerm, LumpedMass,
-    NodalForceTerm, ParamTerm, PointGravityTerm, Term,
+    NodalForceTerm, ParamTerm, PointGravityTerm, TendonTerm, Term,
 };
 use crate::error::Result;
 use crate::material::Volumetric;
@@ -34,11 +34,15 @@ pub struct TermSpecs {
 pub(crate) struct Terms {
     pub elastic: ElasticTerm,
     pub cables: CableTerm,
+    /// Tendons at their current tensions (commands, or the solver's multipliers).
+    pub tendons: TendonTerm,
     pub mass: LumpedMass,
     /// Contact with obstacles (and the body itself), set by `Model::set_contact`.
     pub contact: Option<ContactTerm>,
     /// Where each cable point was placed.
     pub placements: Vec<Vec<PointPlacement>>,
+    /// Where each cable (in the order given) lives: spring chain or tendon.
+    pub slots: Vec<CableSlot>,
 }
 
 /// The loads of one solve as terms. They are linear in the displacements, so they enter Newton
@@ -62,6 +66,14 @@ impl Terms {
         _specs: &TermSpecs,
     ) -> Result<Self> {
         let n_tets = mesh.n_tets();
+        let n_cables = embedded.slots.len();
+        let index_of = |springs: bool| -> Vec<usize> {
+            (embedded.slots.iter().enumerate())
+                .filter(|(_, slot)| matches!(slot, CableSlot::Springs(_)) == springs)
+                .map(|(c, _)| c)
+                .collect()
+        };
+        let (spring_index, tendon_index) = (index_of(true), index_of(false));
         let element_formulation = match formulation {
             Formulation::Standard => ElementFormulation::Standard,
             Formulation::Mixed { mass } => ElementFormulation::Mixed {
@@ -77,7 +89,8 @@ impl Terms {
                 volumetric,
                 element_formulation,
             ),
-            cables: CableTerm::new(embedded.cables),
+            cables: CableTerm::with_param_index(embedded.cables, spring_index, n_cables),
+            tendons: TendonTerm::new(embedded.tendons, tendon_index, n_cables),
             mass: LumpedMass {
                 mesh: mesh.clone(),
                 density: vec![0.0; n_tets],
@@ -87,13 +100,14 @@ impl Terms {
             },
             contact: None,
             placements: embedded.placements,
+            slots: embedded.slots,
         })
     }
 
     /// The terms whose sum is the internal energy, in the assembler's order (the assembler is
     /// built from this list and every evaluation passes it again).
-    pub fn internal(&self) -> [&dyn Term; 2] {
-        [&self.elastic, &self.cables]
+    pub fn internal(&self) -> [&dyn Term; 3] {
+        [&self.elastic, &self.cables, &self.tendons]
     }
 
     /// The loads of `loads` as terms (gravity on the tets and the free cable nodes, nodal forces).
@@ -115,12 +129,13 @@ impl Terms {
     }
 
     /// Every term with parameters, internal and external: what sensitivities differentiate.
-    pub fn parameterised<'a>(&'a self, loads: &'a LoadTerms<'a>) -> [&'a dyn ParamTerm; 4] {
+    pub fn parameterised<'a>(&'a self, loads: &'a LoadTerms<'a>) -> [&'a dyn ParamTerm; 5] {
         [
             &self.elastic,
             &loads.gravity,
             &loads.point_gravity,
             &self.cables,
+            &self.tendons,
         ]
     }
 }
