@@ -7,15 +7,17 @@ to the current maximum) or, chosen in the "colour by" dropdown, by von Mises str
 the cables as red polylines, the fixed nodes as blue points and, optionally, the rest shape or
 the surface as a wireframe in the same colours. Shift + drag on the body pulls the node under
 the pointer with a spring (:meth:`View.grab`, :meth:`View.drag_to`, :meth:`View.release`), as
-runSofa and MuJoCo's viewer do. The control panel has one slider per cable that
-moves its actuation alpha by continuation from the equilibrium shown, in steps of at most
-:data:`sorofem.cables.DEFAULT_ALPHA_STEP` as :func:`sorofem.actuate` does, and a dropdown that
-switches between the standard and the mixed formulation. A scene with ``[dynamics]`` is shown at
-its static equilibrium, and its button "simulate [dynamics]" (:meth:`View.simulate`; disabled,
-with a hint, when the scene has none) integrates the motion with the formulation and cable
-actuations set in the page, showing the steps done and a cancel button, and plays it in the same
-page with the playback controls below, until "back to static" (:meth:`View.show_static`). A
-trajectory of your own plays with :func:`view_trajectory`.
+runSofa and MuJoCo's viewer do. The control panel has one slider per cable for its command
+(the actuation alpha of a spring chain, the pull in mm or the tension in N of a tendon) that
+moves it by continuation from the equilibrium shown, as :func:`sorofem.actuate` does, and a
+dropdown that switches between the standard and the mixed formulation; the status gives each
+tendon's solved tension and pull (a slack tendon is drawn grey and said to be slack). A
+scene with ``[dynamics]`` is shown at its static equilibrium, and its button "simulate
+[dynamics]" (:meth:`View.simulate`; disabled, with a hint, when the scene has none) integrates
+the motion with the formulation and cable actuations set in the page, showing the steps done
+and a cancel button, and plays it in the same page with the playback controls below, until
+"back to static" (:meth:`View.show_static`). A trajectory of your own plays with
+:func:`view_trajectory`.
 
 ``sorofem view`` (:func:`serve`) gives every browser tab its own view (its own body, sliders,
 checkboxes, playback and camera: :func:`serving.per_client` on viser's client handles);
