@@ -50,6 +50,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("scene",),
     ("viewer.style", "viewer.serving", "viewer.colours", "viewer.frames"),
     ("viewer.commands",),
+    ("viewer.contact",),
     ("viewer.playback",),
     ("viewer.static_view",),
     ("viewer",),

@@ -779,3 +779,63 @@ def test_browser_pulls_a_node_with_shift_drag(server) -> None:
         assert _wait(lambda: view.dragged is None, 10.0), "releasing the mouse did not let go"
         np.testing.assert_allclose(view.result.positions, before, atol=1e-7)
     assert not errors, errors
+
+
+#: The cable cantilever with its cable a tendon along the top, pulled 10 mm, and a table below
+#: the free end (which the pull lifts off it, or gravity lays on it).
+TENDON_ON_TABLE = """\
+[mesh]
+box = { size = [0.4, 0.1, 0.1], cells = [8, 2, 2] }
+
+[material]
+youngs_modulus = 66e3
+poisson_ratio = 0.45
+density = 1080
+
+[[fixed]]
+box = { min = [-1e-9, -1, -1], max = [1e-9, 1, 1] }
+
+[loads]
+gravity = [0, 0, -9.81]
+
+[[cable]]
+model = "tendon"
+start = [0.01, 0.05, 0.09]
+direction = [1, 0, 0]
+length = 0.38
+divisions = 8
+pull = 0.0
+
+[[obstacle]]
+plane = { point = [0, 0, -0.03], normal = [0, 0, 1] }
+"""
+
+
+@browser_test
+def test_browser_drives_a_tendon_slider_and_draws_the_obstacles(server, tmp_path) -> None:
+    path = tmp_path / "tendon_on_table.toml"
+    path.write_text(TENDON_ON_TABLE, encoding="utf-8")
+    view = build_view(sf.Scene.load(path), server)
+    assert view.result.obstacle_forces[0][2] > 0  # gravity lays the free end on the table
+    with _browser_page(server, "cable 0 pull [mm]") as (page, errors):
+        page.get_by_text("contact force arrows: 1 N =").first.wait_for(timeout=30_000)
+        page.get_by_text("(tendon, pull 0 mm)").first.wait_for(timeout=30_000)
+        # The slider in the page: three steps right pull the tendon 3 mm (its step is 1 mm over
+        # 0 .. 100 mm, a quarter of its 0.38 m rounded up).
+        assert view.slider_specs[0].step == 1.0 and view.slider_specs[0].max == 100.0
+        slider = page.get_by_role("slider").first
+        slider.focus()
+        for _ in range(3):
+            slider.press("ArrowRight")
+        assert _wait(lambda: view.body.commands[0][1] == pytest.approx(3e-3), 20.0), view.body.commands
+        assert _wait(lambda: view.result.cable_pull[0] == pytest.approx(3e-3, rel=1e-9), 20.0)
+        page.get_by_text("(tendon, pull 3 mm): taut").first.wait_for(timeout=30_000)
+        # The obstacle and the arrows are drawn: hiding them changes the picture.
+        canvas = page.locator("canvas").first
+        shots = [canvas.screenshot()]
+        assert _wait(lambda: shots.append(canvas.screenshot()) or shots[-1] == shots[-2], 20.0), "no still picture"
+        drawn = shots[-1]
+        for handle in (*view.obstacles, view.arrows):
+            handle.visible = False
+        assert _wait(lambda: canvas.screenshot() != drawn, 20.0), "hiding the obstacle changed nothing on screen"
+    assert not errors, errors

@@ -17,7 +17,8 @@ import pytest
 
 import sorofem as sf
 from sorofem.viewer.commands import cable_lines, command_slider, is_slack, nice_ceiling, tension_scale
-from sorofem.viewer.style import PULL_RANGE_FRACTION
+from sorofem.viewer.contact import contact_arrows, obstacle_lines, obstacle_meshes
+from sorofem.viewer.style import ARROW_LENGTH, ARROW_THRESHOLD, PULL_RANGE_FRACTION
 
 #: The 0.4 m silicone cantilever (8 x 2 x 2 cells) with three cables: a tendon along the top
 #: pulled 10 mm, a tendon along the bottom at tension 0.5 N and a spring chain at alpha 0.95.
@@ -61,10 +62,45 @@ stiffness = 1e5
 actuation = 0.95
 """
 
+#: A 0.1 m block resting on a table under gravity, a ball, a crate and a tetrahedron (a closed
+#: triangle surface) beside it.
+CONTACT_SCENE = """\
+[mesh]
+box = { size = [0.1, 0.1, 0.1], cells = [2, 2, 2], origin = [0, 0, 1e-4] }
+
+[material]
+youngs_modulus = 66e3
+poisson_ratio = 0.45
+density = 1080
+
+[loads]
+gravity = [0, 0, -9.81]
+
+[[obstacle]]
+plane = { point = [0, 0, 0], normal = [0, 0, 1] }
+friction = 0.5
+
+[[obstacle]]
+sphere = { center = [0.3, 0.05, 0.05], radius = 0.04 }
+
+[[obstacle]]
+box = { min = [-0.3, 0, 0], max = [-0.2, 0.1, 0.1] }
+"""
+TETRAHEDRON = (np.array([[0.0, 0.3, 0.0], [0.1, 0.3, 0.0], [0.0, 0.4, 0.0], [0.0, 0.3, 0.1]]),
+               np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]))
+
+
 @pytest.fixture
 def tendon_scene(tmp_path: Path) -> Path:
     path = tmp_path / "tendons.toml"
     path.write_text(TENDON_SCENE, encoding="utf-8")
+    return path
+
+
+@pytest.fixture
+def contact_scene(tmp_path: Path) -> Path:
+    path = tmp_path / "table.toml"
+    path.write_text(CONTACT_SCENE, encoding="utf-8")
     return path
 
 
@@ -114,6 +150,71 @@ def test_cable_lines_report_tension_pull_and_slack(tendon_scene) -> None:
     assert f"tension {result.cable_tension[0]:.4g} N" in top and "pull 10 mm" in top
     assert bottom.startswith("cable 1 (tendon, pull 0 mm): **slack**") and "tension 0 N" in bottom
     assert spring.startswith("cable 2: alpha 0.950, tension ")
+
+
+# ---------------------------------------------------------------------------
+# Obstacles and contact arrows, without a server
+
+
+def test_obstacle_meshes_draw_each_kind_where_it_is(contact_scene) -> None:
+    body = sf.Scene.load(contact_scene).body
+    body.add_obstacle(sf.Obstacle.mesh(TETRAHEDRON))
+    plane, ball, crate, tetrahedron = obstacle_meshes(body)
+    # The table: a quad in the plane z = 0 around the block, larger than its footprint.
+    vertices, triangles = plane
+    assert triangles.shape == (2, 3) and np.all(vertices[:, 2] == 0.0)
+    lo, hi = body.mesh.bounds
+    assert np.all(vertices[:, :2].min(axis=0) < lo[:2]) and np.all(vertices[:, :2].max(axis=0) > hi[:2])
+    vertices, triangles = ball
+    np.testing.assert_allclose(np.linalg.norm(vertices - [0.3, 0.05, 0.05], axis=1), 0.04, rtol=1e-12)
+    assert triangles.max() < len(vertices)
+    vertices, triangles = crate
+    assert triangles.shape == (12, 3) and np.array_equal(vertices.min(axis=0), [-0.3, 0, 0])
+    vertices, triangles = tetrahedron
+    np.testing.assert_array_equal(vertices, TETRAHEDRON[0]) and np.testing.assert_array_equal(triangles, TETRAHEDRON[1])
+    # A moving obstacle is drawn where it is at t = 0, where static solves hold it.
+    moving = sf.Scene.load(contact_scene).body
+    moving.add_obstacle(sf.Sphere((0.05, 0.05, 0.4), 0.05), path=[[0.0, 0.0, 0.0, 0.1], [1.0, 0.0, 0.0, 0.0]])
+    vertices = obstacle_meshes(moving)[-1][0]
+    np.testing.assert_allclose(np.linalg.norm(vertices - [0.05, 0.05, 0.5], axis=1), 0.05, rtol=1e-12)
+
+
+def test_contact_arrows_carry_the_weight(contact_scene) -> None:
+    scene = sf.Scene.load(contact_scene)
+    result = scene.solve()
+    weight = 1080 * 0.1**3 * 9.81
+    lo, hi = scene.mesh.bounds
+    size = float(np.linalg.norm(hi - lo))
+    arrows = contact_arrows(result, size)
+    forces = result.contact_forces
+    # Each arrow ends at its node and, divided by the scale, is the node's contact force; the
+    # nodes left out carry less than the threshold, and the arrows carry the block's weight.
+    np.testing.assert_allclose(arrows.segments[:, 1], result.positions[arrows.nodes], rtol=0, atol=0)
+    vectors = (arrows.segments[:, 1] - arrows.segments[:, 0]) / arrows.scale
+    np.testing.assert_allclose(vectors, forces[arrows.nodes], rtol=1e-12, atol=1e-12 * weight)
+    left_out = np.setdiff1d(np.arange(len(forces)), arrows.nodes)
+    assert np.all(np.linalg.norm(forces[left_out], axis=1) <= ARROW_THRESHOLD * arrows.largest)
+    assert vectors.sum(axis=0)[2] == pytest.approx(weight, rel=1e-6)
+    # The longest arrow is at most ARROW_LENGTH of the body's size, and 1 N is a round length.
+    longest = np.linalg.norm(arrows.segments[:, 1] - arrows.segments[:, 0], axis=1).max()
+    assert ARROW_LENGTH * size / 10 < longest <= ARROW_LENGTH * size * (1 + 1e-12)
+    assert nice_ceiling(1e-3 / arrows.scale) == pytest.approx(1e-3 / arrows.scale)
+    assert f"1 N = {arrows.scale * 1e3:.3g} mm" in arrows.legend
+    # The side panel: each obstacle with its total force; the table carries the weight.
+    table, ball, crate = obstacle_lines(result)
+    assert table.startswith("obstacle 0 (plane): force (") and f"|F| = {weight:.4g} N" in table
+    assert "min distance" in table and "nothing near" in ball and crate.startswith("obstacle 2 (box)")
+    # Without obstacles: no arrows, no lines.
+    free = sf.solve_static(_cantilever())
+    assert contact_arrows(free, 1.0).nodes.size == 0 and obstacle_lines(free) == []
+    assert contact_arrows(free, 1.0).legend == "contact forces: none"
+
+
+def _cantilever() -> sf.Body:
+    mesh = sf.Mesh.box(size=(0.4, 0.1, 0.1), cells=(4, 1, 1))
+    body = sf.Body(mesh, sf.NeoHookean(youngs_modulus=66e3, poisson_ratio=0.45, density=1080))
+    body.fix(mesh.nodes_on_plane((0, 0, 0), (1, 0, 0)))
+    return body
 
 
 # ---------------------------------------------------------------------------
@@ -197,6 +298,26 @@ def test_sorofem_view_opens_a_tendon_scene(tendon_scene, monkeypatch, capsys) ->
     monkeypatch.setattr(viewer.serving, "wait_until_interrupted", serve_once)
     assert viewer.serve(tendon_scene, port=_free_port()) == 0
     assert "tendons.toml at http://127.0.0.1:" in capsys.readouterr().out and len(served) == 1
+
+
+def test_obstacles_and_contact_arrows_in_the_view(server, contact_scene) -> None:
+    scene = sf.Scene.load(contact_scene)
+    view = build_view(scene, server)
+    assert len(view.obstacles) == 3 and "3 obstacle(s)" in view._static_controls[0].content
+    for handle, (vertices, triangles) in zip(view.obstacles, obstacle_meshes(scene.body)):
+        np.testing.assert_allclose(handle.vertices, vertices, atol=1e-6)
+        assert np.array_equal(handle.faces, triangles) and handle.opacity < 1
+    lo, hi = scene.mesh.bounds
+    arrows = contact_arrows(view.result, float(np.linalg.norm(hi - lo)))
+    assert view.arrows.visible and arrows.nodes.size > 0
+    np.testing.assert_allclose(view.arrows.points, arrows.segments, atol=1e-7)
+    weight = 1080 * 0.1**3 * 9.81
+    assert arrows.legend in view.contact_panel.content and f"|F| = {weight:.4g} N" in view.contact_panel.content
+    # Another solve (the formulation dropdown rebuilds the body) redraws the arrows.
+    view.formulation.value = "mixed"
+    assert view.solves == 2
+    arrows = contact_arrows(view.result, float(np.linalg.norm(hi - lo)))
+    np.testing.assert_allclose(view.arrows.points, arrows.segments, atol=1e-7)
 
 
 def test_the_playback_shows_a_tendon_s_tension_and_pull(server) -> None:

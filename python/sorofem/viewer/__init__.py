@@ -11,7 +11,9 @@ runSofa and MuJoCo's viewer do. The control panel has one slider per cable for i
 (the actuation alpha of a spring chain, the pull in mm or the tension in N of a tendon) that
 moves it by continuation from the equilibrium shown, as :func:`sorofem.actuate` does, and a
 dropdown that switches between the standard and the mixed formulation; the status gives each
-tendon's solved tension and pull (a slack tendon is drawn grey and said to be slack). A
+tendon's solved tension and pull (a slack tendon is drawn grey and said to be slack). The
+body's obstacles are drawn in translucent grey (a plane as a square around the body) and the
+contact forces as arrows, with their scale and each obstacle's total force in the panel. A
 scene with ``[dynamics]`` is shown at its static equilibrium, and its button "simulate
 [dynamics]" (:meth:`View.simulate`; disabled, with a hint, when the scene has none) integrates
 the motion with the formulation and cable actuations set in the page, showing the steps done

@@ -1,6 +1,7 @@
 """The interactive view of a scene's static equilibrium: cable sliders (alpha, or a tendon's pull
-or tension), the formulation, the colour field and its colour bar, and the button that simulates
-the scene's ``[dynamics]`` (with its progress and a cancel button) and plays the motion in place."""
+or tension), the formulation, the colour field and its colour bar, the obstacles and contact
+forces, and the button that simulates the scene's ``[dynamics]`` (with its progress and a cancel
+button) and plays the motion in place."""
 
 from __future__ import annotations
 
@@ -21,17 +22,23 @@ from ..scene import Scene
 from ..static import StaticResult, actuate
 from .colours import colour_bar_html, colour_field, colour_range, nodal_field, surface_edges, surface_glb
 from .commands import CommandSlider, cable_lines, command_slider, is_slack
+from .contact import contact_arrows, obstacle_lines, obstacle_meshes
 from .frames import Frames
 from .playback import TrajectoryView, build_trajectory_view, simulate_in_chunks
 from .serving import CORE_LOCK, place_camera
 from .style import (
     ALPHA_RANGE,
+    ARROW_COLOUR,
+    ARROW_HEAD,
+    ARROW_SHAFT,
     CABLE_COLOUR,
     DRAG_COLOUR,
     DRAG_ITERATIONS,
     DRAG_STIFFNESS_PER_MU,
     DRAG_TOLERANCE,
     FIXED_COLOUR,
+    OBSTACLE_COLOUR,
+    OBSTACLE_OPACITY,
     PULL_STEP_FRACTION,
     REST_COLOUR,
     SIMULATE_LABEL,
@@ -87,6 +94,10 @@ class View:
         that stops it (:meth:`cancel`).
     colour_bar
         HTML: the colour map of ``colour_by`` with its range and unit.
+    obstacles, arrows, contact_panel
+        One translucent mesh per obstacle of the body, the contact forces as arrows (redrawn
+        after each solve) and the side panel's markdown: the arrows' scale and each
+        obstacle's total force (both None without obstacles).
     """
 
     server: Any
@@ -104,6 +115,9 @@ class View:
     #: ``surface`` to see the cables inside).
     wireframe: Any = None
     cables: list[Any] = field(default_factory=list)
+    obstacles: list[Any] = field(default_factory=list)
+    arrows: Any = None
+    contact_panel: Any = None
     status: Any = None
     #: Static solves shown so far (the initial one included).
     solves: int = 0
@@ -486,6 +500,10 @@ class View:
     def _show_static_view(self, visible: bool) -> None:
         for handle in self._static_nodes + self._static_controls:
             handle.visible = visible
+        if self.arrows is not None:  # shown only where there is contact to show
+            self.arrows.visible = False
+            if visible:
+                self._show_contact(self.result)
         if visible and self._apply_toggles is not None:
             self._apply_toggles(None)
 
@@ -543,12 +561,23 @@ class View:
             colour = np.array(SLACK_COLOUR if is_slack(result, c) else CABLE_COLOUR, dtype=np.uint8)
             if not np.array_equal(handle.colors, colour):
                 handle.colors = colour
+        if self.arrows is not None:
+            self._show_contact(result)
         if self.drag_line is not None:
             if self.dragged is not None and self.drag_anchor is not None:
                 self.drag_line.points = np.array([[result.positions[self.dragged], self.drag_anchor]], dtype=np.float32)
             self.drag_line.visible = self.dragged is not None
         if self.status is not None:
             self.status.content = self._summary()
+
+    def _show_contact(self, result: StaticResult) -> None:
+        """Redraw the contact force arrows and the side panel's totals per obstacle."""
+        lo, hi = self.body.mesh.bounds
+        arrows = contact_arrows(result, float(np.linalg.norm(hi - lo)))
+        # No arrow at all is sent as one of zero length, hidden.
+        self.arrows.points = (arrows.segments if arrows.nodes.size else np.zeros((1, 2, 3))).astype(np.float32)
+        self.arrows.visible = bool(arrows.nodes.size) and self.motion is None
+        self.contact_panel.content = "  \n".join([arrows.legend, *obstacle_lines(result)])
 
     def _summary(self) -> str:
         r = self.result
@@ -652,6 +681,16 @@ def build_view(
             thickness=3.0, thickness_units="screen",
         ))
     view._static_nodes += view.cables
+    for k, (vertices, triangles) in enumerate(obstacle_meshes(body)):
+        view.obstacles.append(server.scene.add_mesh_simple(
+            f"/obstacles/{k}", vertices.astype(np.float32), triangles.astype(np.uint32), color=OBSTACLE_COLOUR,
+            opacity=OBSTACLE_OPACITY, side="double",
+        ))
+    view._static_nodes += view.obstacles
+    if body.obstacles:
+        view.arrows = server.scene.add_arrows("/contact/forces", np.zeros((1, 2, 3), dtype=np.float32), ARROW_COLOUR,
+                                              shaft_radius=ARROW_SHAFT * size, head_radius=0.4 * ARROW_HEAD * size,
+                                              head_length=ARROW_HEAD * size, visible=False)
     mu = body.material.per_element(body.mesh.n_tets)[0]
     view.drag_stiffness = DRAG_STIFFNESS_PER_MU * float(np.mean(mu)) * size
     view.drag_line = server.scene.add_line_segments("/drag", np.zeros((1, 2, 3), dtype=np.float32), DRAG_COLOUR,
@@ -661,8 +700,8 @@ def build_view(
 
     gui = server.gui
     header = gui.add_markdown(f"**{scene.path.name}**: {body.mesh.n_nodes} nodes, {body.mesh.n_tets} tets, "
-                              f"{len(body.cables)} cable(s)  \nshift + drag on the body: pull a node with a "
-                              f"spring of {view.drag_stiffness:.3g} N/m")
+                              f"{len(body.cables)} cable(s), {len(body.obstacles)} obstacle(s)  \nshift + drag on the "
+                              f"body: pull a node with a spring of {view.drag_stiffness:.3g} N/m")
     view.formulation = gui.add_dropdown("formulation", list(FORMULATIONS), initial_value=body.formulation)
     view.formulation.on_update(lambda event: view.set_formulation(event.target.value))
     for c in range(len(body.cables)):
@@ -701,7 +740,11 @@ def build_view(
                                         hint="stop the simulation; the static view stays")
     view.cancel_button.on_click(lambda _: view.cancel())
     view.status = gui.add_markdown("")
+    if view.arrows is not None:
+        view.contact_panel = gui.add_markdown("")
     view._show(result, count=False)
     view._static_controls += [header, view.formulation, *view.sliders, view.colour_dropdown, view.colour_bar,
                               see_through, show_rest, view.simulate_button, view.status]
+    if view.contact_panel is not None:
+        view._static_controls.append(view.contact_panel)
     return view
