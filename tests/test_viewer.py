@@ -556,20 +556,20 @@ def test_simulate_shows_progress_and_can_be_cancelled(server, tmp_path, monkeypa
 
 @contextlib.contextmanager
 def _tabs(server, count: int):
-    """``count`` connected tabs: viser counts a client once it has sent its camera."""
+    """``count`` connected tabs: viser counts a client once it has sent its camera. The camera
+    message is written as the page's script sends it (msgpack on the websocket), not built
+    from viser's private message classes."""
     import msgspec
-    from viser import _messages
     from websockets.sync.client import connect
 
-    camera = _messages.ViewerCameraMessage(
-        wxyz=(1.0, 0.0, 0.0, 0.0), position=(0.0, -1.0, 0.5), fov=1.0, near=0.01, far=100.0, image_height=480,
-        image_width=640, look_at=(0.0, 0.0, 0.0), up_direction=(0.0, 0.0, 1.0),
-    )
+    camera = {"type": "ViewerCameraMessage", "wxyz": (1.0, 0.0, 0.0, 0.0), "position": (0.0, -1.0, 0.5),
+              "fov": 1.0, "near": 0.01, "far": 100.0, "image_height": 480, "image_width": 640,
+              "look_at": (0.0, 0.0, 0.0), "up_direction": (0.0, 0.0, 1.0)}
     sockets = []
     for _ in range(count):
         sockets.append(connect(f"ws://127.0.0.1:{server.get_port()}", subprotocols=[f"viser-v{viser.__version__}"],
                                max_size=None, max_queue=None))
-        sockets[-1].send(msgspec.msgpack.encode(camera.as_serializable_dict()))
+        sockets[-1].send(msgspec.msgpack.encode(camera))
     try:
         yield
     finally:
