@@ -618,6 +618,47 @@ def test_each_tab_has_its_own_view(server, tmp_path) -> None:
         tabs.close()
 
 
+def test_tabs_of_sorofem_view_warm_start_from_their_own_solves_only(tmp_path, monkeypatch) -> None:
+    """The tabs of ``sorofem view`` shared one compiled model, which keeps the last solve's tendon
+    tensions (and pressures, barrier stiffness) as the next warm start: a tab's solve started
+    from another tab's. Each tab now has a model of its own: a move in one tab gives, bit for
+    bit, what the same move gives on a body nobody else touched."""
+    import copy
+
+    import sorofem.viewer as viewer
+
+    path = tmp_path / "tendon.toml"
+    path.write_text((SCENES / "cable_cantilever.toml").read_text(encoding="utf-8").replace(
+        "stiffness = 1e5", 'model = "tendon"\npull = 0.01').replace("actuation = 0.8\n", ""), encoding="utf-8")
+    scene = sf.Scene.load(path)
+    assert scene.body.commands == [("pull", 0.01)]
+    checked = []
+
+    def serve_once(server, on_stop):
+        tabs = on_stop.__self__
+        with _tabs(server, 2):
+            first, second = tabs.wait_for(2)
+            assert first.body.core_model() is not second.body.core_model()
+            first.sliders[0].value = 60.0  # mm: a hard pull in the first tab
+            second.sliders[0].value = 40.0  # taut (the first 20 mm or so take up the sag)
+            # The same move on a copy of the scene's body with a model of its own.
+            alone = copy.deepcopy(scene.body)
+            start = scene.solve(body=copy.deepcopy(scene.body))
+            (reference,) = sf.actuate(alone, 0, [0.04], scene.gravity, initial=start,
+                                      tolerance=scene.solve_options.tolerance,
+                                      max_iterations=scene.solve_options.max_iterations)
+            assert second.result.report.iterations == reference.report.iterations
+            assert np.array_equal(second.result.positions, reference.positions)
+            assert 0 < second.result.cable_tension[0] == reference.cable_tension[0] < first.result.cable_tension[0]
+            checked.append(True)
+        on_stop()
+        server.stop()
+
+    monkeypatch.setattr(viewer.serving, "wait_until_interrupted", serve_once)
+    assert viewer.serve(path, port=_free_port()) == 0
+    assert checked == [True]
+
+
 # ---------------------------------------------------------------------------
 # A real browser: headless Chromium (Debian package) driven by Playwright's Python package.
 

@@ -61,6 +61,7 @@ Play a motion (serves on http://127.0.0.1:8080 until Ctrl-C):
 
 from __future__ import annotations
 
+import copy
 import os
 from pathlib import Path
 from typing import Any
@@ -102,7 +103,9 @@ def serve(path: str | os.PathLike[str], host: str = "127.0.0.1", port: int = 808
     ``[dynamics]`` are simulated and played), a ``.pvd`` time series, or a folder holding
     ``trajectory.pvd`` (``sorofem run``'s ``--out`` folder), which is played. Each browser tab
     gets its own view (:func:`per_client`): the scene is solved once, and each tab moves its own
-    copy of the body from that equilibrium.
+    copy of the body from that equilibrium, with a compiled model of its own (a model keeps the
+    last solve's tendon tensions, pressures and barrier stiffness as the next warm start, which
+    must not come from another tab).
     """
     viser = serving.require_viser()
     path = Path(path)
@@ -126,7 +129,9 @@ def serve(path: str | os.PathLike[str], host: str = "127.0.0.1", port: int = 808
         what = str(path)
 
         def build(client: Any) -> Any:
-            return build_view(scene, client, body=scene.body.replace(), equilibrium=equilibrium)
+            # A deep copy travels without the compiled model (Body.__getstate__), as a pickled
+            # body does: each tab builds its own.
+            return build_view(scene, client, body=copy.deepcopy(scene.body), equilibrium=equilibrium)
     server = viser.ViserServer(host=host, port=port, verbose=False)
     tabs = per_client(server, build)
     print(f"sorofem view: {what} at http://{host}:{server.get_port()} (Ctrl-C to stop)", flush=True)
