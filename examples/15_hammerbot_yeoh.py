@@ -151,7 +151,7 @@ def rounded(value: float, std: float) -> str:
 
 
 def run(out_dir: str | Path = "results/hammerbot_yeoh", quick: bool = False) -> dict[str, Any]:
-    """Fit, write ``summary.json`` and ``fit.png`` to ``out_dir`` and return the summary
+    """Fit, write ``summary.json``, ``fit.png`` and ``profile.png`` to ``out_dir`` and return the summary
     (``checks`` inside)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
