@@ -273,6 +273,7 @@ impl Model {
     /// velocity (m/s), and whether the body's surface may touch itself; `None` takes the core's
     /// defaults. An empty list without self-contact removes contact.
     #[pyo3(signature = (obstacles, dhat = None, stiffness = None, friction_slip = None, friction_velocity = None, self_contact = false))]
+    #[allow(clippy::too_many_arguments)] // the keyword arguments of the Python call
     fn set_contact(
         &mut self,
         py: Python<'_>,
