@@ -56,6 +56,8 @@ class _ContactForces(TypedDict):
     obstacle_forces: _F  # (k, 3) N, per obstacle, on the body
     min_distance: _F  # (k,) m; NaN: nothing within the report radius
     active: _I  # (k,) stencils closer than dhat
+    self_active: int  # self-contact stencils closer than dhat
+    self_min_distance: float  # m; NaN: no self-contact or nothing within the report radius
 
 class _Contact(_ContactForces):
     stiffness: float  # barrier stiffness in force, J/m^4
@@ -141,9 +143,12 @@ def check_obstacle(obstacle: dict[str, Any]) -> dict[str, Any]:
     geometry, optional "friction" and "path"); {"closed": bool} (+ "vertices" (n, 3),
     "triangles" (m, 3) for boxes and meshes). Raises ParameterError / MeshError."""
 
-def check_contact(points: _F, tets: _I, obstacles: list[dict[str, Any]], dhat: float | None = None) -> dict[str, Any]:
-    """Check obstacles against a body at rest (the error names the obstacle, the first node or
-    triangle and its distance) and dhat (> 0); {"dhat": the activation distance in force, m}."""
+def check_contact(
+    points: _F, tets: _I, obstacles: list[dict[str, Any]], dhat: float | None = None, self_contact: bool = False
+) -> dict[str, Any]:
+    """Check obstacles (and the surface against itself, with self_contact) against a body at rest
+    (the error names the obstacle, the first node or triangle and its distance) and dhat (> 0);
+    {"dhat": the activation distance in force, m}."""
 
 def _contact_reference(x: _F, dhat: float) -> dict[str, Any]:
     """Test hook: distances, mollifier and barrier at four points (4, 3) for the ipctk comparison."""
@@ -338,10 +343,12 @@ class Model:
         stiffness: float | None = None,
         friction_slip: float | None = None,
         friction_velocity: float | None = None,
+        self_contact: bool = False,
     ) -> None:
         """Set (replace) the obstacles (see check_obstacle) and the contact settings: dhat (m),
         reference barrier stiffness (J/m^4), static friction slip (m), dynamic friction velocity
-        (m/s); None takes the default. An empty list removes contact."""
+        (m/s), self-contact of the surface; None takes the default. An empty list without
+        self-contact removes contact."""
     def contact_settings(self) -> _ContactSettings | None: ...
     def contact_forces(self, positions: _F) -> _ContactForces | None:
         """Contact forces at node positions (n, 3); None without obstacles."""

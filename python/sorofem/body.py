@@ -69,9 +69,9 @@ class ObstaclePlacement:
                 "path": None if self.path is None else self.path.tolist()}
 
 
-#: Contact settings :meth:`Body.set_contact` takes, with their units.
+#: Contact settings :meth:`Body.set_contact` takes, with their units ("" for the switch).
 CONTACT_SETTINGS: dict[str, str] = {
-    "dhat": "m", "stiffness": "J/m^4", "friction_slip": "m", "friction_velocity": "m/s",
+    "dhat": "m", "stiffness": "J/m^4", "friction_slip": "m", "friction_velocity": "m/s", "self_contact": "",
 }
 
 
@@ -159,7 +159,7 @@ class Body:
         self._commands: list[tuple[str, float]] = []
         self._stiffnesses: list[float] = []
         self._obstacles: list[ObstaclePlacement] = []
-        self._contact: dict[str, float | None] = dict.fromkeys(CONTACT_SETTINGS)
+        self._contact: dict[str, float | bool | None] = dict.fromkeys(CONTACT_SETTINGS) | {"self_contact": False}
         # The activation distance in force (from the core's check of the obstacles).
         self._dhat: float | None = None
         # What the extension's model was last given for contact (set again when it changes): a
@@ -512,11 +512,11 @@ class Body:
             if np.any(np.diff(keyframes[:, 0]) < 0):
                 raise ParameterError(f"path: keyframe times must not decrease, got {keyframes[:, 0].tolist()}", "path")
         placement = ObstaclePlacement(obstacle, friction, keyframes)
-        self._check_contact(self._obstacles + [placement], self._contact["dhat"])
+        self._check_contact(self._obstacles + [placement], self._contact)
         self._obstacles.append(placement)
         return len(self._obstacles) - 1
 
-    def set_contact(self, **settings: float | None) -> None:
+    def set_contact(self, **settings: float | bool | None) -> None:
         """Change contact settings, given as keywords (``None`` restores a default); the
         settings not given keep their values.
 
@@ -535,29 +535,50 @@ class Body:
         friction_velocity : float or None
             Dynamics: the sliding speed below which friction sticks (smoothed), m/s. Default
             1e-3 (IPC's).
+        self_contact : bool or None
+            Whether the body's boundary surface may touch itself (frictionless; vertex-triangle
+            and edge-edge pairs of the surface that share no vertex). Default ``False``. The
+            self-contact forces are part of ``result.contact_forces`` (they sum to zero) and
+            its active pairs of ``result.active_contacts``.
 
         Raises
         ------
         InputError
             An unknown setting.
         ParameterError
-            A value that is not finite and > 0.
+            A value that is not finite and > 0, a ``self_contact`` that is not a bool, or a body
+            whose surface touches itself at rest (with self-contact).
+
+        Examples
+        --------
+        >>> import sorofem as sf
+        >>> mesh = sf.Mesh.box(size=(0.1, 0.02, 0.02), cells=(5, 1, 1))
+        >>> body = sf.Body(mesh, sf.NeoHookean(youngs_modulus=1e5, poisson_ratio=0.45))
+        >>> body.set_contact(self_contact=True)
+        >>> body.contact_settings["self_contact"]
+        True
         """
+        merged = dict(self._contact)
         for name, value in settings.items():
             if name not in CONTACT_SETTINGS:
                 raise InputError(f"set_contact: unknown setting {name!r}; expected one of {list(CONTACT_SETTINGS)}")
-            if value is not None:
-                positive_scalar(value, name)
-        merged = self._contact | {k: (None if v is None else float(v)) for k, v in settings.items()}
-        self._check_contact(self._obstacles, merged["dhat"])
+            if name == "self_contact":
+                if value is not None and not isinstance(value, (bool, np.bool_)):
+                    raise ParameterError(f"self_contact: expected True or False, got {value!r}", name)
+                merged[name] = bool(value)
+            else:
+                merged[name] = None if value is None else positive_scalar(value, name)
+        self._check_contact(self._obstacles, merged)
         self._contact = merged
 
-    def _check_contact(self, obstacles: list[ObstaclePlacement], dhat: float | None) -> None:
-        """The core's check of the obstacles against the rest mesh; keeps the dhat in force."""
-        if not obstacles:
+    def _check_contact(self, obstacles: list[ObstaclePlacement], settings: dict[str, float | bool | None]) -> None:
+        """The core's check of the obstacles (and the surface, with self-contact) against the
+        rest mesh; keeps the dhat in force."""
+        if not obstacles and not settings["self_contact"]:
             self._dhat = None
             return
-        checked = core().check_contact(self._mesh.points, self._mesh.tets, [o.to_core() for o in obstacles], dhat)
+        checked = core().check_contact(self._mesh.points, self._mesh.tets, [o.to_core() for o in obstacles],
+                                       settings["dhat"], bool(settings["self_contact"]))
         self._dhat = float(checked["dhat"])
 
     @property
@@ -566,7 +587,7 @@ class Body:
         return tuple(self._obstacles)
 
     @property
-    def contact_settings(self) -> dict[str, float | None]:
+    def contact_settings(self) -> dict[str, float | bool | None]:
         """The contact settings given (``None``: default); see :meth:`set_contact`."""
         return dict(self._contact)
 

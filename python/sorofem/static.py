@@ -134,7 +134,8 @@ class ContactState:
     Attributes
     ----------
     forces
-        Force the obstacles exert on each node, ``(n_nodes, 3)``, N (barrier and friction).
+        Force the obstacles (and the body's own surface, with self-contact) exert on each node,
+        ``(n_nodes, 3)``, N (barrier and friction).
     obstacle_forces
         Total force of each obstacle on the body, ``(n_obstacles, 3)``, N.
     min_distances
@@ -142,6 +143,11 @@ class ContactState:
         nothing of the body is near it (farther than a twentieth of the scene's size).
     active
         Number of contact stencils closer than ``dhat`` per obstacle, ``(n_obstacles,)``.
+    self_active
+        Self-contact stencils closer than ``dhat`` (0 without self-contact).
+    self_min_distance
+        Smallest distance between surface primitives of the body that share no vertex, m;
+        ``None`` without self-contact or when none are near.
     dhat
         The barrier's activation distance, m.
     stiffness
@@ -156,6 +162,9 @@ class ContactState:
         self.obstacle_forces = np.asarray(data["obstacle_forces"], dtype=np.float64).reshape(-1, 3)
         self.min_distances = np.asarray(data["min_distance"], dtype=np.float64).reshape(-1)
         self.active = np.asarray(data["active"], dtype=np.int64).reshape(-1)
+        self.self_active = int(data.get("self_active", 0))
+        self_distance = float(data.get("self_min_distance", math.nan))
+        self.self_min_distance = self_distance if math.isfinite(self_distance) else None
         self.dhat = float(data.get("dhat", math.nan))
         self.stiffness = float(data.get("stiffness", math.nan))
         self.iterate_min_distances = np.asarray(data.get("iterate_min_distances", []), dtype=np.float64)
@@ -168,8 +177,8 @@ class ContactState:
 
     @property
     def active_contacts(self) -> int:
-        """Contact stencils closer than ``dhat``, over all obstacles."""
-        return int(self.active.sum())
+        """Contact stencils closer than ``dhat``, over all obstacles and self-contact."""
+        return int(self.active.sum()) + self.self_active
 
     def to_dict(self, obstacles: Sequence[Any] = ()) -> dict[str, Any]:
         """Plain JSON types for ``summary.json``; ``obstacles`` (the body's placements) add each
@@ -181,6 +190,7 @@ class ContactState:
             "total_force": self.obstacle_forces.sum(axis=0).tolist(),
             "min_distance": self.min_distance,
             "active_contacts": self.active_contacts,
+            "self_contact": {"active_contacts": self.self_active, "min_distance": self.self_min_distance},
             "obstacles": [
                 {**described[k], "force": self.obstacle_forces[k].tolist(),
                  "min_distance": float(d) if math.isfinite(d) else None, "active_contacts": int(self.active[k])}
@@ -340,7 +350,7 @@ class StaticResult:
 
     @property
     def active_contacts(self) -> int:
-        """Contact stencils closer than ``dhat``, over all obstacles."""
+        """Contact stencils closer than ``dhat``, over all obstacles and self-contact."""
         return 0 if self.contact is None else self.contact.active_contacts
 
     @property

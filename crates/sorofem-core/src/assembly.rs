@@ -233,6 +233,68 @@ impl Assembler {
         (f != FIXED).then_some(f as usize)
     }
 
+    /// Adds the entries `(row, col)` (free indices, `row >= col`) missing from the pattern: the
+    /// couplings of stencils no term declares (self-contact between distant surface points).
+    /// The element plans keep their order and colouring (those follow the DOFs, not the stored
+    /// positions) and only their positions are renumbered. Returns whether the pattern grew:
+    /// Hessian values and factorisations of the old pattern are then stale.
+    pub fn add_entries(&mut self, entries: &[(usize, usize)]) -> bool {
+        let mut extra: Vec<(usize, usize)> = entries
+            .iter()
+            .filter(|&&(r, c)| self.pattern.position(r, c).is_none())
+            .map(|&(r, c)| (c, r))
+            .collect();
+        if extra.is_empty() {
+            return false;
+        }
+        extra.sort_unstable();
+        extra.dedup();
+        let old = &self.pattern;
+        let mut col_ptr = Vec::with_capacity(old.n + 1);
+        let mut row_idx = Vec::with_capacity(old.nnz() + extra.len());
+        let mut moved = vec![0u32; old.nnz()];
+        let mut next_extra = extra.iter().peekable();
+        col_ptr.push(0);
+        for c in 0..old.n {
+            let mut added: Vec<usize> = Vec::new();
+            while let Some(&&(col, row)) = next_extra.peek() {
+                if col != c {
+                    break;
+                }
+                added.push(row);
+                next_extra.next();
+            }
+            let rows = old.col_ptr[c]..old.col_ptr[c + 1];
+            let (mut i, mut j) = (rows.start, 0);
+            while i < rows.end || j < added.len() {
+                if j == added.len() || (i < rows.end && old.row_idx[i] < added[j]) {
+                    moved[i] = row_idx.len() as u32;
+                    row_idx.push(old.row_idx[i]);
+                    i += 1;
+                } else {
+                    row_idx.push(added[j]);
+                    j += 1;
+                }
+            }
+            col_ptr.push(row_idx.len());
+        }
+        assert!(
+            row_idx.len() < TWICE as usize,
+            "Hessian entries exceed 31-bit indexing"
+        );
+        for plan in &mut self.plans {
+            for p in plan.positions.iter_mut().filter(|p| **p != FIXED) {
+                *p = moved[(*p & !TWICE) as usize] | (*p & TWICE);
+            }
+        }
+        self.pattern = LowerPattern {
+            n: old.n,
+            col_ptr,
+            row_idx,
+        };
+        true
+    }
+
     /// Total energy of `terms` at the full DOF vector `z`; `+inf` if any element is inverted.
     pub fn energy(&self, terms: &[&dyn Term], z: &[f64]) -> f64 {
         self.evaluate(terms, z, false, None).energy

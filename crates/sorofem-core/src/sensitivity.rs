@@ -324,10 +324,12 @@ impl Model {
         if self.factor_at_solution {
             return Ok(());
         }
+        let z = z.clone();
+        self.cover_self_contact(&z)?;
         let mut eval =
             self.assembler
-                .evaluate(&self.terms.internal(), z, false, Some(HessianMode::Exact));
-        self.add_contact_hessian(z, &mut eval.hessian, HessianMode::Exact);
+                .evaluate(&self.terms.internal(), &z, false, Some(HessianMode::Exact));
+        self.add_contact_hessian(&z, &mut eval.hessian, HessianMode::Exact);
         let ok = self
             .factor
             .factor(self.assembler.pattern(), &eval.hessian)?;

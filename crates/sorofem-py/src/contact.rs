@@ -10,7 +10,9 @@ use sorofem_core::model::ContactFrame;
 use sorofem_core::Orientation;
 
 /// The contact forces of a state as a dict: "forces" (n, 3), "obstacle_forces" (k, 3) N,
-/// "min_distance" (k,) m (NaN: nothing within the report radius), "active" (k,).
+/// "min_distance" (k,) m (NaN: nothing within the report radius), "active" (k,), and for
+/// self-contact "self_active" (stencils within dhat) and "self_min_distance" (m, NaN: nothing
+/// within the report radius or no self-contact).
 pub fn forces_to_dict<'py>(
     py: Python<'py>,
     forces: &sorofem_core::contact::ContactForces,
@@ -32,6 +34,11 @@ pub fn forces_to_dict<'py>(
     d.set_item("min_distance", PyArray1::from_vec(py, distances))?;
     let active: Vec<i64> = forces.active.iter().map(|&a| a as i64).collect();
     d.set_item("active", PyArray1::from_vec(py, active))?;
+    d.set_item("self_active", forces.self_active)?;
+    d.set_item(
+        "self_min_distance",
+        forces.self_min_distance.unwrap_or(f64::NAN),
+    )?;
     Ok(d)
 }
 
@@ -188,22 +195,25 @@ pub fn check_obstacle<'py>(
     Ok(out)
 }
 
-/// Checks obstacles against a body mesh at rest (each apart from it: the error names the
-/// obstacle, the node or triangle and the distance) and the contact settings; returns
-/// {"dhat": m}, the activation distance in force (the default when `dhat` is None).
+/// Checks obstacles against a body mesh at rest (each apart from it, and the body's surface
+/// apart from itself with self-contact: the error names the obstacle, the node or triangle and
+/// the distance) and the contact settings; returns {"dhat": m}, the activation distance in
+/// force (the default when `dhat` is None).
 #[pyfunction]
-#[pyo3(signature = (points, tets, obstacles, dhat = None))]
+#[pyo3(signature = (points, tets, obstacles, dhat = None, self_contact = false))]
 pub fn check_contact<'py>(
     py: Python<'py>,
     points: &Bound<'py, PyAny>,
     tets: &Bound<'py, PyAny>,
     obstacles: &Bound<'py, PyList>,
     dhat: Option<f64>,
+    self_contact: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let (mesh, _) = crate::mesh::build(py, points, tets, Orientation::Reject)?;
     let setup = sorofem_core::contact::ContactSetup {
         obstacles: obstacle_specs(py, obstacles)?,
         dhat,
+        self_contact,
         ..Default::default()
     };
     let term = guarded(py, || {

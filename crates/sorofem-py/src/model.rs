@@ -276,8 +276,10 @@ impl Model {
     /// Sets (replaces) the obstacles: a list of dicts (see the binding's `obstacle_spec`:
     /// "kind" and its geometry, "friction", "path"), the activation distance `dhat` (m), the
     /// reference barrier stiffness (J/m^4), the static friction slip (m) and the dynamic friction
-    /// velocity (m/s); `None` takes the core's defaults. An empty list removes contact.
-    #[pyo3(signature = (obstacles, dhat = None, stiffness = None, friction_slip = None, friction_velocity = None))]
+    /// velocity (m/s), and whether the body's surface may touch itself; `None` takes the core's
+    /// defaults. An empty list without self-contact removes contact.
+    #[pyo3(signature = (obstacles, dhat = None, stiffness = None, friction_slip = None, friction_velocity = None, self_contact = false))]
+    #[allow(clippy::too_many_arguments)] // the keyword arguments of the Python call
     fn set_contact(
         &mut self,
         py: Python<'_>,
@@ -286,6 +288,7 @@ impl Model {
         stiffness: Option<f64>,
         friction_slip: Option<f64>,
         friction_velocity: Option<f64>,
+        self_contact: bool,
     ) -> PyResult<()> {
         let setup = sorofem_core::contact::ContactSetup {
             obstacles: crate::contact::obstacle_specs(py, obstacles)?,
@@ -293,6 +296,7 @@ impl Model {
             stiffness,
             friction_slip,
             friction_velocity,
+            self_contact,
         };
         let inner = &mut self.inner;
         guarded(py, || inner.set_contact(setup))

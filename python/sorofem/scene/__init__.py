@@ -94,10 +94,12 @@ Schema
                                                  # and held outside their range, followed with [dynamics] (static
                                                  # solves use t = 0), s, m
 
-    [contact]                  # optional: Contact settings for the [[obstacle]] entries
-                               # (sorofem.Body.set_contact).
+    [contact]                  # optional: Contact settings: the [[obstacle]] entries' and the body's contact with
+                               # itself (sorofem.Body.set_contact).
     # dhat = 0.0001            # activation distance of the contact barrier: the body rests a fraction of it away
                                # from an obstacle (default: 1 % of the mean boundary edge length), m
+    # self_contact = true      # the body's boundary surface may touch itself (frictionless; its forces are part
+                               # of the contact forces and sum to zero) (default false)
 
     [dynamics]                 # optional: Integrate in time (implicit Euler, lumped mass; density > 0) instead of
                                # a static solve.

@@ -372,8 +372,11 @@ _CONTACT = Table(
                                "sticks (default dhat / 10)", "m", default=None),
         "friction_velocity": Field(Number(Range(gt=0)), "dynamics: sliding speed below which friction sticks",
                                    "m/s", default=None),
+        "self_contact": Field(Boolean(), "the body's boundary surface may touch itself (frictionless; its forces "
+                              "are part of the contact forces and sum to zero)", default=False, example=True,
+                              commented=True),
     },
-    doc="Contact settings for the [[obstacle]] entries (sorofem.Body.set_contact).",
+    doc="Contact settings: the [[obstacle]] entries' and the body's contact with itself (sorofem.Body.set_contact).",
 )
 
 _DYNAMICS = Table(

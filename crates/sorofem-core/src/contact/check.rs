@@ -53,16 +53,29 @@ pub enum Intersection {
         triangle: [usize; 3],
         distance: f64,
     },
+    /// With self-contact: a body edge meets a body triangle it shares no vertex with.
+    SelfEdgeTriangle {
+        edge: [usize; 2],
+        triangle: [usize; 3],
+    },
 }
 
 impl Intersection {
-    pub fn obstacle(&self) -> usize {
+    /// The obstacle met (`None`: the body meets itself).
+    pub fn obstacle(&self) -> Option<usize> {
         match self {
             Intersection::Node { obstacle, .. }
             | Intersection::EdgeTriangle { obstacle, .. }
             | Intersection::InsideBody { obstacle, .. }
-            | Intersection::Triangle { obstacle, .. } => *obstacle,
+            | Intersection::Triangle { obstacle, .. } => Some(*obstacle),
+            Intersection::SelfEdgeTriangle { .. } => None,
         }
+    }
+
+    /// The input this intersection makes wrong: `obstacles[k]`, or `self_contact`.
+    pub fn param(&self) -> String {
+        self.obstacle()
+            .map_or("self_contact".into(), |k| format!("obstacles[{k}]"))
     }
 }
 
@@ -75,6 +88,10 @@ impl fmt::Display for Intersection {
             Intersection::EdgeTriangle { edge, triangle, .. } => {
                 write!(f, "edge {edge:?} crossing triangle {triangle:?}")
             }
+            Intersection::SelfEdgeTriangle { edge, triangle } => write!(
+                f,
+                "body edge {edge:?} meeting body triangle {triangle:?} (the surface meets itself)"
+            ),
             Intersection::Triangle {
                 triangle, distance, ..
             } => write!(
@@ -90,9 +107,10 @@ impl fmt::Display for Intersection {
     }
 }
 
-/// The first intersection (in obstacle order) between the body at positions `x` (all vertices)
-/// and its obstacles, touching included; `None` when they are apart. Closed obstacle meshes
-/// also catch a body node inside them, and closed bodies an obstacle inside them.
+/// The first intersection (in obstacle order, then of the body with itself when self-contact is
+/// on) between the body at positions `x` (all vertices) and its obstacles, touching included;
+/// `None` when they are apart. Closed obstacle meshes also catch a body node inside them, and
+/// closed bodies an obstacle inside them.
 pub fn find_intersection(mesh: &CollisionMesh, x: &[Vec3]) -> Option<Intersection> {
     let body_faces = mesh.body_faces();
     let body_closed = super::obstacle::edges_and_closedness(body_faces).1;
@@ -145,7 +163,39 @@ pub fn find_intersection(mesh: &CollisionMesh, x: &[Vec3]) -> Option<Intersectio
             return found;
         }
     }
+    if mesh.self_contact() {
+        return self_intersection(mesh, x);
+    }
     None
+}
+
+/// The first body edge that meets a body triangle it shares no vertex with (touching
+/// included): where a surface passes through itself, an edge of one sheet crosses a triangle of
+/// the other.
+pub fn self_intersection(mesh: &CollisionMesh, x: &[Vec3]) -> Option<Intersection> {
+    let faces = mesh.body_faces();
+    let boxes: Vec<Aabb> = faces
+        .iter()
+        .map(|f| Aabb::of_segment(&x[f[0]], &x[f[1]]).merged(&Aabb::of_segment(&x[f[2]], &x[f[2]])))
+        .collect();
+    let tree = Bvh::new(&boxes);
+    mesh.body_edges().par_iter().find_map_first(|e| {
+        let mut hit = None;
+        tree.query(&Aabb::of_segment(&x[e[0]], &x[e[1]]), |i| {
+            let f = faces[i];
+            if hit.is_none()
+                && !f.contains(&e[0])
+                && !f.contains(&e[1])
+                && segment_meets_triangle(&x[e[0]], &x[e[1]], [&x[f[0]], &x[f[1]], &x[f[2]]])
+            {
+                hit = Some(Intersection::SelfEdgeTriangle {
+                    edge: *e,
+                    triangle: f,
+                });
+            }
+        });
+        hit
+    })
 }
 
 /// [`find_intersection`] as an error naming the obstacle (`obstacles[k]`), for rest
@@ -154,8 +204,8 @@ pub fn check_no_intersection(mesh: &CollisionMesh, x: &[Vec3]) -> Result<()> {
     match find_intersection(mesh, x) {
         None => Ok(()),
         Some(intersection) => Err(Error::invalid(
-            &format!("obstacles[{}]", intersection.obstacle()),
-            "an obstacle apart from the body in its rest configuration",
+            &intersection.param(),
+            "a body apart from its obstacles and from itself in its rest configuration",
             intersection,
         )),
     }

@@ -24,6 +24,8 @@ pub mod friction;
 pub mod obstacle;
 pub mod potential;
 mod psd;
+pub mod self_contact;
+mod stencil;
 pub mod term;
 
 pub use barrier::StiffnessBounds;

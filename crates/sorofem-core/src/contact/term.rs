@@ -6,8 +6,11 @@
 //! body vertex against an obstacle triangle, plane or sphere; an obstacle vertex against a body
 //! triangle; a body edge against an obstacle edge), and the elastic term couples those already:
 //! the assembler's fixed pattern holds every entry of a contact Hessian, so contact needs no new
-//! symbolic factorisation. (Self-contact would couple distant vertices: it needs the pattern
-//! enlarged by the pairs within a proximity radius, and a new analysis when new pairs appear.)
+//! symbolic factorisation. Self-contact (body vertex - body triangle, body edge - body edge,
+//! never two primitives sharing a vertex) couples surface points far apart in the mesh: before
+//! a Hessian is assembled, the model adds the couplings of the self-contact candidates within
+//! [`ContactTerm::self_coupling_reach`] (wider than `dhat`, so that the pattern grows once or
+//! twice per solve, not per new contact) and analyses again only when the pattern grew.
 
 use super::barrier::{barrier_gradient, initial_barrier_stiffness, StiffnessBounds};
 use super::broad_phase::{candidates, swept_candidates};
@@ -21,6 +24,7 @@ use super::distance::Vec3;
 use super::friction::{lag_friction, FrictionStencil};
 use super::obstacle::Obstacle;
 use super::potential::{candidate_squared_distance, BarrierPotential};
+use super::stencil::{FreeScatter, Stencil};
 use crate::assembly::Assembler;
 use crate::energy::HessianMode;
 use crate::error::{check_finite, Error, Result};
@@ -65,6 +69,8 @@ pub struct ContactSetup {
     pub friction_slip: Option<f64>,
     /// Dynamics' friction velocity `eps_v` (m/s); default [`DEFAULT_FRICTION_VELOCITY`].
     pub friction_velocity: Option<f64>,
+    /// Whether the body's boundary surface may touch itself (frictionless self-contact).
+    pub self_contact: bool,
 }
 
 /// The result of one contact pass: energy (J; `+inf` when a stencil touches) and the smallest
@@ -91,15 +97,11 @@ pub struct ContactForces {
     pub min_distance: Vec<Option<f64>>,
     /// Stencils closer than `dhat` per obstacle.
     pub active: Vec<usize>,
-}
-
-/// One active stencil of a pass: its energy, gradient (`3 n`) and optionally its Hessian
-/// (`3 n x 3 n` row-major) over [`Candidate::vertices`].
-struct Stencil {
-    candidate: Candidate,
-    energy: f64,
-    gradient: [f64; 12],
-    hessian: Vec<f64>,
+    /// Self-contact: the stencils closer than `dhat`, and the smallest distance (m) between
+    /// non-adjacent surface primitives within the report radius (`None`: none that close, or
+    /// no self-contact). Its forces are in `nodal` and sum to zero (internal forces).
+    pub self_active: usize,
+    pub self_min_distance: Option<f64>,
 }
 
 /// Contact of a body with its obstacles, as a term of its model.
@@ -128,9 +130,9 @@ pub struct ContactTerm {
 }
 
 impl ContactTerm {
-    /// Contact of the body `mesh` with `setup`'s obstacles (self-contact is not handled). Checks
-    /// every value and that no obstacle touches the body at rest (the error names the
-    /// obstacle, the node or triangle, and the distance).
+    /// Contact of the body `mesh` with `setup`'s obstacles, and with itself when
+    /// `setup.self_contact`. Checks every value and that nothing touches the body at rest (the
+    /// error names the obstacle, the node or triangle, and the distance).
     pub fn try_new(mesh: &TetMesh, setup: ContactSetup) -> Result<Self> {
         let mut geometry = Vec::with_capacity(setup.obstacles.len());
         let mut friction = Vec::new();
@@ -160,7 +162,7 @@ impl ContactTerm {
             friction.push(spec.friction);
             paths.push(path);
         }
-        let rest = CollisionMesh::from_tet_mesh(mesh, geometry, false);
+        let rest = CollisionMesh::from_tet_mesh(mesh, geometry, setup.self_contact);
         let edges = rest.body_edges();
         let mean_edge = edges
             .iter()
@@ -217,6 +219,10 @@ impl ContactTerm {
 
     pub fn dhat(&self) -> f64 {
         self.dhat
+    }
+
+    pub fn self_contact(&self) -> bool {
+        self.mesh.self_contact()
     }
 
     pub fn n_obstacles(&self) -> usize {
@@ -653,6 +659,8 @@ impl ContactTerm {
             per_obstacle: vec![[0.0; 3]; n_obstacles],
             min_distance: vec![None; n_obstacles],
             active: vec![0; n_obstacles],
+            self_active: 0,
+            self_min_distance: None,
         };
         let barrier = self.barrier_stencils(&x, None).unwrap_or_default();
         let friction = self.friction_stencils(&x, None);
@@ -662,8 +670,10 @@ impl ContactTerm {
             .chain(friction.iter().map(|s| (s, false)))
         {
             let obstacle = self.obstacle_of(&stencil.candidate);
-            if let (true, Some(k)) = (is_barrier, obstacle) {
-                out.active[k] += 1;
+            match (is_barrier, obstacle) {
+                (true, Some(k)) => out.active[k] += 1,
+                (true, None) => out.self_active += 1,
+                _ => {}
             }
             let (ids, n) = stencil.candidate.vertices();
             for (a, &v) in ids[..n].iter().enumerate() {
@@ -690,6 +700,10 @@ impl ContactTerm {
                 .map(|(d, _)| d)
                 .filter(|&d| d <= self.report_radius());
         }
+        let own: Vec<Candidate> = near.iter().filter(|c| self.is_self(c)).copied().collect();
+        out.self_min_distance = minimum_distance(&self.mesh, &own, &x)
+            .map(|(d, _)| d)
+            .filter(|&d| d <= self.report_radius());
         out
     }
 
@@ -742,54 +756,5 @@ impl ContactTerm {
             hi = hi.sup(p);
         }
         (hi - lo).norm()
-    }
-}
-
-/// Adds stencil values into the free DOFs of an assembler: obstacle vertices and fixed DOFs are
-/// not unknowns and drop out.
-struct FreeScatter<'a> {
-    assembler: &'a Assembler,
-    n_body: usize,
-}
-
-impl FreeScatter<'_> {
-    /// Free index of coordinate `k` of stencil vertex `v`, when it is one.
-    fn free(&self, v: usize, k: usize) -> Option<usize> {
-        (v < self.n_body)
-            .then(|| self.assembler.free_of_full(3 * v + k))
-            .flatten()
-    }
-
-    fn add_gradient(&self, stencil: &Stencil, gradient: &mut [f64]) {
-        let (ids, n) = stencil.candidate.vertices();
-        for (a, &v) in ids[..n].iter().enumerate() {
-            for k in 0..3 {
-                if let Some(f) = self.free(v, k) {
-                    gradient[f] += stencil.gradient[3 * a + k];
-                }
-            }
-        }
-    }
-
-    fn add_hessian(&self, stencil: &Stencil, values: &mut [f64]) {
-        let (ids, n) = stencil.candidate.vertices();
-        let size = 3 * n;
-        let pattern = self.assembler.pattern();
-        for r in 0..size {
-            let Some(row) = self.free(ids[r / 3], r % 3) else {
-                continue;
-            };
-            for c in 0..size {
-                let Some(col) = self.free(ids[c / 3], c % 3) else {
-                    continue;
-                };
-                if row >= col {
-                    let position = pattern
-                        .position(row, col)
-                        .expect("body-obstacle stencils couple DOFs of one boundary triangle");
-                    values[position] += stencil.hessian[r * size + c];
-                }
-            }
-        }
     }
 }

@@ -1,6 +1,7 @@
 //! A model's obstacles: setting them up, the reference barrier stiffness, what a solve reports
 //! of its contact, and what reactions and sensitivities need of it.
 
+use super::system::System;
 use super::Model;
 use crate::contact::check::find_intersection;
 use crate::contact::{ContactForces, ContactSetup, ContactTerm};
@@ -22,11 +23,11 @@ pub struct ContactReport {
 }
 
 impl Model {
-    /// Sets (replaces) the model's obstacles and contact settings; no obstacles removes
-    /// contact. Errors name the bad value, or the obstacle that touches the body at rest (with
-    /// the node or triangle and the distance).
+    /// Sets (replaces) the model's obstacles and contact settings; no obstacles and no
+    /// self-contact removes contact. Errors name the bad value, or the obstacle that touches the
+    /// body at rest (with the node or triangle and the distance).
     pub fn set_contact(&mut self, setup: ContactSetup) -> Result<()> {
-        self.terms.contact = if setup.obstacles.is_empty() {
+        self.terms.contact = if setup.obstacles.is_empty() && !setup.self_contact {
             None
         } else {
             Some(ContactTerm::try_new(&self.mesh, setup)?)
@@ -34,6 +35,55 @@ impl Model {
         self.last_state = None;
         self.factor_at_solution = false;
         Ok(())
+    }
+
+    /// Makes the Hessian pattern hold the couplings of every self-contact stencil near the body
+    /// at the full DOF vector `z` (within [`ContactTerm::self_coupling_reach`]), and analyses
+    /// the grown pattern afresh when it lacked some: a symbolic analysis per growth, never per
+    /// Newton iteration, and reused by every later solve. Returns whether the pattern grew
+    /// (Hessian values and factorisations of the old one are then stale). Without self-contact
+    /// the pattern holds every contact coupling already and nothing happens.
+    pub(crate) fn cover_self_contact(&mut self, z: &[f64]) -> Result<bool> {
+        let Some(term) = self.terms.contact.as_ref().filter(|t| t.self_contact()) else {
+            return Ok(false);
+        };
+        let mut entries = Vec::new();
+        for [a, b] in term.self_couplings(z) {
+            for i in 0..3 {
+                for j in 0..3 {
+                    let free = (self.assembler.free_of_full(3 * a + i))
+                        .zip(self.assembler.free_of_full(3 * b + j));
+                    if let Some((r, c)) = free {
+                        entries.push((r.max(c), r.min(c)));
+                    }
+                }
+            }
+        }
+        if !self.assembler.add_entries(&entries) {
+            return Ok(false);
+        }
+        let fixed_dofs = self.layout.fixed_dofs(&self.fixed_nodes);
+        let mut fixed_set = vec![false; self.mesh.n_nodes()];
+        for &node in &self.fixed_nodes {
+            fixed_set[node] = true;
+        }
+        self.factor = super::analyse_pattern(
+            self.assembler.pattern(),
+            self.formulation,
+            &self.layout,
+            &self.terms,
+            &fixed_dofs,
+            &fixed_set,
+        )?;
+        self.symbolic_analyses += 1;
+        self.factor_at_solution = false;
+        Ok(true)
+    }
+
+    /// Symbolic analyses of the Hessian pattern since the model was built (one at construction,
+    /// one per growth of the pattern by self-contact).
+    pub fn symbolic_analyses(&self) -> usize {
+        self.symbolic_analyses
     }
 
     /// Turns the contact audit on or off (see [`ContactTerm::set_audit`]); no effect without
@@ -80,7 +130,7 @@ impl Model {
             Some(intersection) => Err(Error::invalid(
                 param,
                 "positions apart from every obstacle",
-                format!("obstacles[{}]: {intersection}", intersection.obstacle()),
+                format!("{}: {intersection}", intersection.param()),
             )),
         }
     }
@@ -165,5 +215,18 @@ impl Model {
             .zip(self.mesh.rest_flat())
             .map(|(x, r)| x - r)
             .collect())
+    }
+}
+
+impl System<'_> {
+    /// [`Model::cover_self_contact`] at the state `z` before a Hessian is assembled there; a
+    /// factorisation kept for reuse belongs to the old pattern and is dropped when it grew.
+    pub(super) fn cover_self_contact(&mut self, z: &[f64]) -> Result<()> {
+        if self.model.cover_self_contact(z)? {
+            if let Some(reuse) = &mut self.reuse {
+                reuse.kept = None;
+            }
+        }
+        Ok(())
     }
 }

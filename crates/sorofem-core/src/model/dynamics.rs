@@ -169,8 +169,6 @@ pub(crate) struct StepSetup {
     pub(crate) free: Vec<usize>,
     /// Mass (kg) of each free DOF (zero on pressures).
     pub(crate) mass: Vec<f64>,
-    /// Position of each free DOF's diagonal entry in the Hessian pattern.
-    pub(crate) diagonal: Vec<usize>,
     /// Free DOFs that are displacements (the pressures, mixed only, come after them).
     pub(crate) n_displacement: usize,
     pub(crate) full_load: Vec<f64>,
@@ -415,16 +413,11 @@ impl Model {
         let free: Vec<usize> = self.assembler.full_of_free().to_vec();
         let mass_full = self.terms.mass.per_dof(self.layout.n_full());
         let mass: Vec<f64> = free.iter().map(|&d| mass_full[d]).collect();
-        let pattern = self.assembler.pattern();
-        let diagonal = (0..free.len())
-            .map(|f| pattern.position(f, f).expect("diagonal in pattern"))
-            .collect();
         // Pressures (mixed formulation) are never fixed and come last among the free DOFs.
         let n_displacement = free.len() - if self.layout.pressures { n } else { 0 };
         Ok(StepSetup {
             free,
             mass,
-            diagonal,
             n_displacement,
             full_load: self.load_vector(loads),
             prescribed: self.prescribed(loads),
@@ -703,7 +696,6 @@ impl Model {
             mass_damping: setup.mass.iter().map(|m| alpha_m * m / h).collect(),
             internal_scale: 1.0 + beta_k / h,
             start_force,
-            diagonal: setup.diagonal.clone(),
         }
     }
 }

@@ -84,6 +84,41 @@ pub struct Model {
     pub(crate) factor_at_solution: bool,
     /// Where the last simulation ended (see `dynamics::Continuation`).
     pub(crate) continuation: Option<dynamics::Continuation>,
+    /// Symbolic analyses of the Hessian pattern so far: one at construction, one more each
+    /// time self-contact couples DOFs the pattern lacked.
+    pub(crate) symbolic_analyses: usize,
+}
+
+/// The symbolic factorisation of the Hessian `pattern`: approximate minimum degree (standard
+/// formulation, `L L^T`), or displacements before pressures in the order of
+/// [`layout::saddle_point_order`] (mixed, `L D L^T` without pivoting).
+fn analyse_pattern(
+    pattern: &crate::linear::LowerPattern,
+    formulation: Formulation,
+    layout: &DofLayout,
+    terms: &Terms,
+    fixed_dofs: &[bool],
+    fixed_set: &[bool],
+) -> Result<SparseFactor> {
+    match formulation {
+        Formulation::Standard => SparseFactor::analyse(pattern, FactorKind::Llt),
+        Formulation::Mixed { mass } => {
+            let compliance = PressureCompliance {
+                elastic: &terms.elastic,
+                mass,
+            };
+            let mut free_of_full = vec![None; layout.n_full()];
+            for (index, d) in (0..layout.n_full()).filter(|&d| !fixed_dofs[d]).enumerate() {
+                free_of_full[d] = Some(index);
+            }
+            // The pressure unknowns live on the nodes, so this pattern is the node graph.
+            let n = layout.n_nodes;
+            let node_graph = crate::assembly::pattern_of(&vec![false; n], &[&compliance]);
+            let node_order = crate::linear::amd_order(&node_graph)?;
+            let order = layout::saddle_point_order(layout, &free_of_full, &node_order, fixed_set);
+            SparseFactor::analyse_with_order(pattern, &order, FactorKind::Ldlt)
+        }
+    }
 }
 
 impl Model {
@@ -150,31 +185,16 @@ impl Model {
         let terms = Terms::new(&mesh, &layout, formulation, volumetric, embedded, specs)?;
         let fixed_dofs = layout.fixed_dofs(&fixed);
         // The symbolic factorisation needs only the pattern: it runs beside the element plans.
-        let (assembler, factor) = match formulation {
-            Formulation::Standard => {
-                Assembler::new_with(&fixed_dofs, &terms.internal(), |pattern| {
-                    SparseFactor::analyse(pattern, FactorKind::Llt)
-                })
-            }
-            Formulation::Mixed { mass } => {
-                let compliance = PressureCompliance {
-                    elastic: &terms.elastic,
-                    mass,
-                };
-                let mut free_of_full = vec![None; layout.n_full()];
-                for (index, d) in (0..layout.n_full()).filter(|&d| !fixed_dofs[d]).enumerate() {
-                    free_of_full[d] = Some(index);
-                }
-                Assembler::new_with(&fixed_dofs, &terms.internal(), |pattern| {
-                    // The pressure unknowns live on the nodes, so this pattern is the node graph.
-                    let node_graph = crate::assembly::pattern_of(&vec![false; n], &[&compliance]);
-                    let node_order = crate::linear::amd_order(&node_graph)?;
-                    let order =
-                        layout::saddle_point_order(&layout, &free_of_full, &node_order, &fixed_set);
-                    SparseFactor::analyse_with_order(pattern, &order, FactorKind::Ldlt)
-                })
-            }
-        };
+        let (assembler, factor) = Assembler::new_with(&fixed_dofs, &terms.internal(), |pattern| {
+            analyse_pattern(
+                pattern,
+                formulation,
+                &layout,
+                &terms,
+                &fixed_dofs,
+                &fixed_set,
+            )
+        });
         Ok(Model {
             mesh,
             fixed_nodes: fixed,
@@ -185,6 +205,7 @@ impl Model {
             assembler,
             factor: factor?,
             hessian_scratch: Default::default(),
+            symbolic_analyses: 1,
             pressure_weight: 1.0,
             constraint_weight: 1.0,
             last_extra: None,

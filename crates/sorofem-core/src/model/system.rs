@@ -135,7 +135,6 @@ pub(super) struct StepTerms {
     pub(super) internal_scale: f64,
     /// `beta_K / h F(z_n)` on the free DOFs (empty without stiffness damping).
     pub(super) start_force: Vec<f64>,
-    pub(super) diagonal: Vec<usize>,
 }
 
 impl StepTerms {
@@ -162,11 +161,11 @@ impl StepTerms {
         }
     }
 
-    /// Adds the inertia and mass damping to the Hessian's values (the internal terms' already
-    /// scaled by `internal_scale`, see `System::scale_internal`).
-    fn add_hessian(&self, hessian: &mut [f64]) {
-        for (d, &p) in self.diagonal.iter().enumerate() {
-            hessian[p] += self.inertia[d] + self.mass_damping[d];
+    /// Adds the inertia and mass damping to the diagonal (each column's first entry) of the
+    /// Hessian's values in `pattern` (the internal terms' already scaled by `internal_scale`).
+    fn add_hessian(&self, pattern: &crate::linear::LowerPattern, hessian: &mut [f64]) {
+        for d in 0..self.inertia.len() {
+            hessian[pattern.col_ptr[d]] += self.inertia[d] + self.mass_damping[d];
         }
     }
 }
@@ -539,6 +538,9 @@ impl NewtonProblem for System<'_> {
     }
 
     fn merit_gradient_and_hessian(&mut self, z: &mut [f64]) -> (f64, Vec<f64>) {
+        if self.cover_self_contact(z).is_err() {
+            return self.merit_and_gradient(z); // `direction` reports the error
+        }
         let full = self.full_dofs(z);
         let mut eval = std::mem::take(&mut self.model.hessian_scratch);
         self.model.assembler.evaluate_into(
@@ -583,6 +585,7 @@ impl NewtonProblem for System<'_> {
             HessianMode::Exact
         };
         let t0 = Instant::now();
+        self.cover_self_contact(z)?;
         let full = self.full_dofs(z);
         let mut eval = std::mem::take(&mut self.model.hessian_scratch);
         if !(self.hessian_prepared && mode == HessianMode::Exact) {
@@ -601,7 +604,7 @@ impl NewtonProblem for System<'_> {
         }
         self.hessian_prepared = false;
         if let Some(step) = &self.step {
-            step.add_hessian(&mut eval.hessian);
+            step.add_hessian(self.model.assembler.pattern(), &mut eval.hessian);
         }
         timings.assembly += t0.elapsed().as_secs_f64();
         let pattern = self.model.assembler.pattern();

@@ -164,8 +164,8 @@ impl Model {
         if self.terms.contact.is_some() {
             return Err(Error::invalid(
                 "obstacles",
-                "a body without obstacles (trajectory gradients through contact are not implemented)",
-                "a body with obstacles",
+                "a body without obstacles or self-contact (trajectory gradients through contact are not implemented)",
+                "a body with contact",
             ));
         }
         if let Some(c) = self
@@ -333,8 +333,10 @@ impl Model {
             self.assembler
                 .evaluate(&self.terms.internal(), z1, true, Some(HessianMode::Exact));
         eval.hessian.iter_mut().for_each(|v| *v *= scale);
-        for (f, &p) in setup.diagonal.iter().enumerate() {
-            eval.hessian[p] += setup.mass[f] / (h * h) + alpha_m * setup.mass[f] / h;
+        // The diagonal is each column's first entry of the lower pattern.
+        let col_ptr = &self.assembler.pattern().col_ptr;
+        for (f, &m) in setup.mass.iter().enumerate() {
+            eval.hessian[col_ptr[f]] += m / (h * h) + alpha_m * m / h;
         }
         if !self
             .factor
