@@ -17,6 +17,10 @@ from the observed one) each observed point is compared with its nearest goal ver
 pairing is piecewise constant in ``x``, so ``J`` is the same weights matrix, exact wherever the
 pairing does not switch.
 
+A contact-force target (:meth:`Target.contact_force`) observes instead the total force an
+obstacle exerts on the body; bound to the body, it is a :class:`BoundContactForce` with the same
+methods, its residual in newtons.
+
 The scalar misfit used by :func:`sorofem.estimate` and :func:`sorofem.control` is
 ``1/2 |r|^2`` (m^2); :meth:`BoundTarget.rms` is ``sqrt(|r|^2 / k)``, the root-mean-square
 distance of the observed points from their goals (m).
