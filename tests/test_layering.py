@@ -49,6 +49,8 @@ LAYERS: list[tuple[str, ...]] = [
     ("scene._scene",),
     ("scene",),
     ("viewer.style", "viewer.serving", "viewer.colours", "viewer.frames"),
+    ("viewer.commands",),
+    ("viewer.contact",),
     ("viewer.playback",),
     ("viewer.static_view",),
     ("viewer",),

@@ -281,6 +281,47 @@ def test_api_result_and_markers(scene, tmp_path, client):
     assert (again.skipped, again.solved) == (2, 0)
 
 
+#: SCENE's beam with its cable a tendon along the top edge, pulled 10 mm.
+TENDON_SCENE = SCENE.replace("stiffness = 1e5\nactuation = 0.9", 'model = "tendon"\npull = 0.01')
+
+
+def test_a_sweep_over_tendon_pulls_and_tensions(tmp_path):
+    """Tendon commands swept on a LocalCluster of this test's own (127.0.0.1, closed at the end):
+    one compiled model per worker serves every case, and each row is the case's own solve."""
+    assert TENDON_SCENE.count('model = "tendon"') == 1
+    pulled, driven = tmp_path / "pulled.toml", tmp_path / "driven.toml"
+    pulled.write_text(TENDON_SCENE, encoding="utf-8")
+    driven.write_text(TENDON_SCENE.replace("pull = 0.01", "tension = 1.0"), encoding="utf-8")
+    pulls, tensions = [0.0, 0.01, 0.02], [0.5, 2.0]
+    from dask.distributed import Client
+
+    from sorofem.sweeps import _solve
+
+    with sf.sweeps.local_cluster(1) as cluster, Client(cluster, set_as_default=False) as client:
+        assert cluster.scheduler_address.startswith("tcp://127.0.0.1:")
+        by_pull = sf.sweep(pulled, tmp_path / "pulls", grid={"cable[0].pull": pulls}, client=client, progress=False)
+        by_tension = sf.sweep(driven, tmp_path / "tensions", grid={"cable[0].tension": tensions}, client=client,
+                              progress=False)
+        kept = client.run(lambda: len(_solve._CACHE))
+    assert (by_pull.solved, by_tension.solved) == (3, 2)
+    # Pull and tension are per-solve values: the worker kept one scene (and model) per scene
+    # file for the five cases, not one per case.
+    assert list(kept.values()) == [2]
+    rows = by_pull.table(pandas=False).to_pylist() + by_tension.table(pandas=False).to_pylist()
+    cases = [(pulled, "pull = 0.01", f"pull = {p!r}") for p in pulls] + [
+        (driven, "tension = 1.0", f"tension = {t!r}") for t in tensions]
+    for row, (path, old, new) in zip(rows, cases):
+        assert row["converged"] is True and row["error"] is None
+        result = sf.Scene.from_toml(path.read_text().replace(old, new), path).solve()
+        assert row["newton_iterations"] == result.report.iterations
+        assert row["cable[0].max_tension"] == result.cable_tension[0]
+        assert [row["tip.x"], row["tip.y"], row["tip.z"]] == result.positions[row["tip.node"]].tolist()
+    # Pulled by a length: the tension it takes grows with the pull; driven by a tension: it carries it.
+    assert rows[0]["cable[0].max_tension"] < rows[1]["cable[0].max_tension"] < rows[2]["cable[0].max_tension"]
+    assert [r["cable[0].max_tension"] for r in rows[3:]] == tensions
+    assert rows[1]["tip.z"] < rows[2]["tip.z"] and rows[3]["tip.z"] < rows[4]["tip.z"]
+
+
 BAD = [
     (["--grid", "material.young=1,2"], "unknown key 'young' under 'material'"),
     (["--grid", "material.youngs_modulus=abc"], "material.youngs_modulus: expected a number, got 'abc'"),

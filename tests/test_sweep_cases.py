@@ -170,3 +170,111 @@ def test_a_value_the_builder_rejects_is_a_failed_row(scene):
     (outcome,) = solve_batch(_batch(scene, ("material.region[0].box.max",), [([-1.0, -1.0, -1.0],)], n_cables=1))
     assert outcome.row["converged"] is False and outcome.row["error"].startswith("bad input:")
     assert "expected min <= max" in outcome.row["error"]
+
+
+#: The beam of SCENE with a tendon along the top pulled 10 mm, a tendon along the bottom at
+#: 0.5 N, and the spring chain of SCENE.
+TENDONS = SCENE.replace("[[cable]]", """[[cable]]
+model = "tendon"
+start = [0.01, 0.05, 0.09]
+direction = [1, 0, 0]
+length = 0.38
+divisions = 4
+pull = 0.01
+
+[[cable]]
+model = "tendon"
+start = [0.01, 0.05, 0.01]
+direction = [1, 0, 0]
+length = 0.38
+divisions = 4
+tension = 0.5
+
+[[cable]]""")
+
+
+def _override(text: str, old: str, new: str) -> str:
+    assert text.count(old) == 1, old
+    return text.replace(old, new)
+
+
+def test_tendon_commands_are_per_solve_values_that_share_one_model(tmp_path):
+    """A tendon's pull and tension, like a spring chain's alpha, are values the compiled model
+    takes at each solve: the cases of a grid over them share one model, and each equals its
+    scene built and solved from scratch, bit for bit."""
+    scene = tmp_path / "tendons.toml"
+    scene.write_text(TENDONS, encoding="utf-8")
+    assert parse_key("cable[0].pull").per_solve and parse_key("cable[1].tension").per_solve
+    keys = ("cable[0].pull", "cable[1].tension", "cable[2].actuation")
+    cases = Cases.build(scene, grid={k: v for k, v in zip(keys, ([0.005, 0.02], [0.0, 2.0], [0.9, 1.0]))})
+    assert cases.n == 8 and len({cases.group(i) for i in range(cases.n)}) == 1
+    clear_cache()
+    rows = [cases.row(i) for i in range(cases.n)]
+    outcomes = solve_batch(_batch(scene, keys, rows, n_cables=3, save=("displacement",)))
+    from sorofem.sweeps import _solve
+
+    assert len(_solve._CACHE) == 1
+    kept = next(iter(_solve._CACHE.values())).scene
+    for (pull, tension, alpha), outcome in zip(rows, outcomes):
+        assert outcome.row["converged"], outcome.row["error"]
+        text = _override(_override(_override(TENDONS, "pull = 0.01", f"pull = {pull!r}"), "tension = 0.5",
+                                   f"tension = {tension!r}"), "actuation = 0.9", f"actuation = {alpha!r}")
+        fresh = sf.Scene.from_toml(text, scene)
+        result = fresh.solve()
+        assert np.array_equal(outcome.fields["displacement"], result.displacement)
+        assert outcome.row["newton_iterations"] == result.report.iterations
+        # The top tendon holds its pull with the tension it takes, or is slack where the spring
+        # chain beside it curls the beam further; the bottom one carries its command.
+        taut = result.cable_pull[0] == pytest.approx(pull, rel=1e-9)
+        assert (taut and result.cable_tension[0] > 0) or (result.cable_pull[0] > pull and result.cable_tension[0] == 0)
+        assert taut or alpha < 1.0
+        assert outcome.row["cable[0].max_tension"] == result.cable_tension[0]
+        assert outcome.row["cable[1].max_tension"] == result.cable_tension[1] == tension
+        like = sf.Scene.from_data(__import__("tomllib").loads(text), scene, like=kept)
+        assert like.body.core_model() is kept.body.core_model() and like.body.commands == fresh.body.commands
+    # A harder pull of the top tendon lifts the free end higher.
+    by = {row: outcome.row for row, outcome in zip(rows, outcomes)}
+    assert by[(0.02, 0.0, 1.0)]["tip.z"] > by[(0.005, 0.0, 1.0)]["tip.z"]
+    clear_cache()
+
+
+def test_a_tendon_command_the_builder_rejects_is_a_failed_row(tmp_path):
+    """Pull and tension are checked per case, also on a scene built like a kept one."""
+    scene = tmp_path / "tendons.toml"
+    scene.write_text(TENDONS, encoding="utf-8")
+    clear_cache()
+    ok, too_long = solve_batch(_batch(scene, ("cable[0].pull",), [(0.02,), (0.5,)], n_cables=3))
+    (both,) = solve_batch(_batch(scene, ("cable[1].pull",), [(0.01,)], n_cables=3))
+    assert ok.row["converged"] and too_long.row["converged"] is False and both.row["converged"] is False
+    assert too_long.row["error"].startswith("bad input:") and "cable[0].pull" in too_long.row["error"]
+    assert "rest length" in too_long.row["error"]
+    assert "cable[1].pull" in both.row["error"] and "exactly one of pull (m) and tension (N)" in both.row["error"]
+    clear_cache()
+
+
+@pytest.mark.parametrize(("material", "key", "values"), [
+    ('model = "yeoh"\nc10 = 11e3\nc20 = -400.0\nc30 = 40.0\nd1 = 2e-6', "material.c10", [8e3, 16e3]),
+    ('model = "ogden"\n"mu:0" = 1.9e3\n"alpha:0" = -3.8\n"mu:1" = 2.2e4\n"alpha:1" = 1.7\nd1 = 2e-6', "material.mu:1",
+     [1.5e4, 3e4]),
+])
+def test_material_coefficient_keys_are_swept(tmp_path, material, key, values):
+    """Coefficients of the other material models by their names (Yeoh's ``c10``, Ogden's
+    ``mu:1``) are sweep keys, per-solve values like Young's modulus."""
+    text = SCENE.replace("youngs_modulus = 66e3\npoisson_ratio = 0.45", material)
+    scene = tmp_path / "material.toml"
+    scene.write_text(text, encoding="utf-8")
+    parsed = parse_key(key)
+    assert parsed.per_solve and parsed.column_type() == "float"
+    cases = Cases.build(scene, grid={key: values})
+    assert cases.columns() == {key: values} and cases.group(0) == cases.group(1)
+    clear_cache()
+    outcomes = solve_batch(_batch(scene, (key,), [(v,) for v in values], n_cables=1, save=("displacement",)))
+    name = key.split(".")[1]
+    for value, outcome in zip(values, outcomes):
+        assert outcome.row["converged"], outcome.row["error"]
+        line = next(line for line in material.splitlines() if line.split("=")[0].strip().strip('"') == name)
+        fresh = sf.Scene.from_toml(text.replace(line, f'"{name}" = {value!r}'), scene).solve()
+        assert np.array_equal(outcome.fields["displacement"], fresh.displacement)
+    # The stiffer case sags less under gravity.
+    assert outcomes[1].row["max_displacement"] < outcomes[0].row["max_displacement"]
+    clear_cache()

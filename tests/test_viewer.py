@@ -556,20 +556,20 @@ def test_simulate_shows_progress_and_can_be_cancelled(server, tmp_path, monkeypa
 
 @contextlib.contextmanager
 def _tabs(server, count: int):
-    """``count`` connected tabs: viser counts a client once it has sent its camera."""
+    """``count`` connected tabs: viser counts a client once it has sent its camera. The camera
+    message is written as the page's script sends it (msgpack on the websocket), not built
+    from viser's private message classes."""
     import msgspec
-    from viser import _messages
     from websockets.sync.client import connect
 
-    camera = _messages.ViewerCameraMessage(
-        wxyz=(1.0, 0.0, 0.0, 0.0), position=(0.0, -1.0, 0.5), fov=1.0, near=0.01, far=100.0, image_height=480,
-        image_width=640, look_at=(0.0, 0.0, 0.0), up_direction=(0.0, 0.0, 1.0),
-    )
+    camera = {"type": "ViewerCameraMessage", "wxyz": (1.0, 0.0, 0.0, 0.0), "position": (0.0, -1.0, 0.5),
+              "fov": 1.0, "near": 0.01, "far": 100.0, "image_height": 480, "image_width": 640,
+              "look_at": (0.0, 0.0, 0.0), "up_direction": (0.0, 0.0, 1.0)}
     sockets = []
     for _ in range(count):
         sockets.append(connect(f"ws://127.0.0.1:{server.get_port()}", subprotocols=[f"viser-v{viser.__version__}"],
                                max_size=None, max_queue=None))
-        sockets[-1].send(msgspec.msgpack.encode(camera.as_serializable_dict()))
+        sockets[-1].send(msgspec.msgpack.encode(camera))
     try:
         yield
     finally:
@@ -616,6 +616,47 @@ def test_each_tab_has_its_own_view(server, tmp_path) -> None:
         assert _wait(lambda: not tabs.views), "closed tabs were not forgotten"
     finally:
         tabs.close()
+
+
+def test_tabs_of_sorofem_view_warm_start_from_their_own_solves_only(tmp_path, monkeypatch) -> None:
+    """The tabs of ``sorofem view`` shared one compiled model, which keeps the last solve's tendon
+    tensions (and pressures, barrier stiffness) as the next warm start: a tab's solve started
+    from another tab's. Each tab now has a model of its own: a move in one tab gives, bit for
+    bit, what the same move gives on a body nobody else touched."""
+    import copy
+
+    import sorofem.viewer as viewer
+
+    path = tmp_path / "tendon.toml"
+    path.write_text((SCENES / "cable_cantilever.toml").read_text(encoding="utf-8").replace(
+        "stiffness = 1e5", 'model = "tendon"\npull = 0.01').replace("actuation = 0.8\n", ""), encoding="utf-8")
+    scene = sf.Scene.load(path)
+    assert scene.body.commands == [("pull", 0.01)]
+    checked = []
+
+    def serve_once(server, on_stop):
+        tabs = on_stop.__self__
+        with _tabs(server, 2):
+            first, second = tabs.wait_for(2)
+            assert first.body.core_model() is not second.body.core_model()
+            first.sliders[0].value = 60.0  # mm: a hard pull in the first tab
+            second.sliders[0].value = 40.0  # taut (the first 20 mm or so take up the sag)
+            # The same move on a copy of the scene's body with a model of its own.
+            alone = copy.deepcopy(scene.body)
+            start = scene.solve(body=copy.deepcopy(scene.body))
+            (reference,) = sf.actuate(alone, 0, [0.04], scene.gravity, initial=start,
+                                      tolerance=scene.solve_options.tolerance,
+                                      max_iterations=scene.solve_options.max_iterations)
+            assert second.result.report.iterations == reference.report.iterations
+            assert np.array_equal(second.result.positions, reference.positions)
+            assert 0 < second.result.cable_tension[0] == reference.cable_tension[0] < first.result.cable_tension[0]
+            checked.append(True)
+        on_stop()
+        server.stop()
+
+    monkeypatch.setattr(viewer.serving, "wait_until_interrupted", serve_once)
+    assert viewer.serve(path, port=_free_port()) == 0
+    assert checked == [True]
 
 
 # ---------------------------------------------------------------------------
@@ -778,4 +819,64 @@ def test_browser_pulls_a_node_with_shift_drag(server) -> None:
         page.keyboard.up("Shift")
         assert _wait(lambda: view.dragged is None, 10.0), "releasing the mouse did not let go"
         np.testing.assert_allclose(view.result.positions, before, atol=1e-7)
+    assert not errors, errors
+
+
+#: The cable cantilever with its cable a tendon along the top, pulled 10 mm, and a table below
+#: the free end (which the pull lifts off it, or gravity lays on it).
+TENDON_ON_TABLE = """\
+[mesh]
+box = { size = [0.4, 0.1, 0.1], cells = [8, 2, 2] }
+
+[material]
+youngs_modulus = 66e3
+poisson_ratio = 0.45
+density = 1080
+
+[[fixed]]
+box = { min = [-1e-9, -1, -1], max = [1e-9, 1, 1] }
+
+[loads]
+gravity = [0, 0, -9.81]
+
+[[cable]]
+model = "tendon"
+start = [0.01, 0.05, 0.09]
+direction = [1, 0, 0]
+length = 0.38
+divisions = 8
+pull = 0.0
+
+[[obstacle]]
+plane = { point = [0, 0, -0.03], normal = [0, 0, 1] }
+"""
+
+
+@browser_test
+def test_browser_drives_a_tendon_slider_and_draws_the_obstacles(server, tmp_path) -> None:
+    path = tmp_path / "tendon_on_table.toml"
+    path.write_text(TENDON_ON_TABLE, encoding="utf-8")
+    view = build_view(sf.Scene.load(path), server)
+    assert view.result.obstacle_forces[0][2] > 0  # gravity lays the free end on the table
+    with _browser_page(server, "cable 0 pull [mm]") as (page, errors):
+        page.get_by_text("contact force arrows: 1 N =").first.wait_for(timeout=30_000)
+        page.get_by_text("(tendon, pull 0 mm)").first.wait_for(timeout=30_000)
+        # The slider in the page: three steps right pull the tendon 3 mm (its step is 1 mm over
+        # 0 .. 100 mm, a quarter of its 0.38 m rounded up).
+        assert view.slider_specs[0].step == 1.0 and view.slider_specs[0].max == 100.0
+        slider = page.get_by_role("slider").first
+        slider.focus()
+        for _ in range(3):
+            slider.press("ArrowRight")
+        assert _wait(lambda: view.body.commands[0][1] == pytest.approx(3e-3), 20.0), view.body.commands
+        assert _wait(lambda: view.result.cable_pull[0] == pytest.approx(3e-3, rel=1e-9), 20.0)
+        page.get_by_text("(tendon, pull 3 mm): taut").first.wait_for(timeout=30_000)
+        # The obstacle and the arrows are drawn: hiding them changes the picture.
+        canvas = page.locator("canvas").first
+        shots = [canvas.screenshot()]
+        assert _wait(lambda: shots.append(canvas.screenshot()) or shots[-1] == shots[-2], 20.0), "no still picture"
+        drawn = shots[-1]
+        for handle in (*view.obstacles, view.arrows):
+            handle.visible = False
+        assert _wait(lambda: canvas.screenshot() != drawn, 20.0), "hiding the obstacle changed nothing on screen"
     assert not errors, errors

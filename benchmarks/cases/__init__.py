@@ -4,7 +4,9 @@ order of the imports is the order of the tables in BENCHMARKS.md and of the runs
 from . import static  # noqa: F401  (cantilevers, standard formulation)
 from . import hammerbot  # noqa: F401  (the paper's robot, standard and mixed)
 from . import mixed  # noqa: F401  (cantilevers, mixed formulation)
+from . import materials  # noqa: F401  (Yeoh against Neo-Hookean, side by side)
 from . import cables  # noqa: F401
+from . import tendons  # noqa: F401  (tendons against spring chains, side by side)
 from . import dynamics  # noqa: F401
 from . import adjoint  # noqa: F401
 from . import contact  # noqa: F401  (the cantilever on a floor, with and without it)

@@ -149,3 +149,27 @@ def tip_mean(mesh: Any, displacement: np.ndarray) -> list[float]:
     """Mean displacement of the hammerbot's tip nodes (its x = +5 cm face), m."""
     tip = np.abs(mesh.points[:, 0] - mesh.points[:, 0].max()) < 1e-9
     return np.asarray(displacement)[tip].mean(axis=0).tolist()
+
+
+def alternate(solves: dict[str, Any], min_repeats: int = 7, budget_s: float = 8.0) -> dict[str, Any]:
+    """Time several solves of one comparison in the same process, one after the other in turn
+    (so that all see the same load on a shared machine), at least once each and until each ran
+    ``min_repeats`` times or ``budget_s`` passed. ``solves``: name -> function returning a plain
+    dict (a row's worth). Returns name -> ``{"seconds": median, "all_seconds", "result": the
+    dict of the median run, "repeats"}``."""
+    import time
+
+    times: dict[str, list[float]] = {name: [] for name in solves}
+    results: dict[str, list[Any]] = {name: [] for name in solves}
+    start = time.perf_counter()
+    while min(map(len, times.values())) < min_repeats and (
+            not min(map(len, times.values())) or time.perf_counter() - start < budget_s):
+        for name, solve in solves.items():
+            t0 = time.perf_counter()
+            results[name].append(solve())
+            times[name].append(time.perf_counter() - t0)
+    out = {}
+    for name, ts in times.items():
+        i = sorted(range(len(ts)), key=ts.__getitem__)[(len(ts) - 1) // 2]
+        out[name] = {"seconds": ts[i], "all_seconds": ts, "result": results[name][i], "repeats": len(ts)}
+    return out

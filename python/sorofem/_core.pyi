@@ -301,7 +301,9 @@ class Model:
         """Static equilibrium. gravity (3,), forces (n, 3), prescribed (k, 3) aligned with
         `fixed`, initial positions (n, 3) or None. Newton settings: options, or the keyword
         arguments (defaults 1e-8, 50 per load step, 1), not both.
-        Raises ConvergenceError whose `.report` is a _Report."""
+        Raises ConvergenceError whose `.report` is a _Report; Ctrl-C (in the main thread)
+        stops it before its next Newton iteration with sorofem.errors.Interrupted, `.report`
+        the _Report so far (None if the solve had ended)."""
     def set_contact(
         self,
         obstacles: list[dict[str, Any]],
@@ -371,4 +373,4 @@ class Model:
         actuation (steps, n_cables) per step: alphas (springs), pulls or tensions (tendons);
         Newton settings per step as for solve (load_steps and max_cutbacks do not apply); method
         "modified", "newton" or "linearly_implicit". Raises ConvergenceError when a step fails
-        even after halving it six times."""
+        even after halving it six times; Interrupted on Ctrl-C, as solve."""

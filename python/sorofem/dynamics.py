@@ -483,9 +483,9 @@ def simulate(
     SolverError
         The integration produced non-finite values.
     Interrupted
-        Ctrl-C between two chunks of steps (when the steps run in chunks: with a progress line
-        or ``on_frames``); ``err.result`` is the :class:`Trajectory` of the steps done (None
-        before the first chunk ended).
+        Ctrl-C: the step running stops before its next Newton iteration; ``err.result`` is the
+        :class:`Trajectory` of the chunks of steps done when the steps run in chunks (with a
+        progress line or ``on_frames``), else None (also before the first chunk ended).
 
     Examples
     --------

@@ -162,19 +162,26 @@ class OutputError(SorofemError, OSError):
 
 class Interrupted(KeyboardInterrupt):
     """A run was stopped by Ctrl-C (SIGINT) or, on the command line, SIGTERM, between two
-    steps of its work. It is a :class:`KeyboardInterrupt`, so code that does not know it
-    stops as before.
+    steps of its work (a solve of the compiled core between two Newton iterations). It is a
+    :class:`KeyboardInterrupt`, so code that does not know it stops as before.
 
     Attributes
     ----------
     result
         What was finished before the interruption, when the function can say (a partial
-        :class:`sorofem.Trajectory` of the frames saved so far), else ``None``.
+        :class:`sorofem.Trajectory` of the frames saved so far, the equilibria of
+        :func:`sorofem.actuate` reached so far), else ``None``.
     signal
         ``"SIGINT"`` or ``"SIGTERM"``.
+    report
+        What the interrupted solve did until then (a :class:`sorofem.SolveReport` when raised
+        through :func:`sorofem.solve_static`, the raw ``dict`` set by the extension), or
+        ``None``.
     """
 
     def __init__(self, message: str = "interrupted", result: Any = None, signal: str = "SIGINT") -> None:
         super().__init__(message)
         self.result = result
         self.signal = signal
+        # Set by the extension after construction, as ConvergenceError.report.
+        self.report: Any = None

@@ -37,7 +37,7 @@ from .cables import (
     check_tension,
     placement_counts,
 )
-from .errors import ConvergenceError, InputError, ParameterError, SolverError
+from .errors import ConvergenceError, InputError, Interrupted, ParameterError, SolverError
 from .io import result_mesh
 from .progress import Progress
 from .solver import SolveOptions, SolveReport
@@ -489,6 +489,9 @@ def solve_static(
     ------
     ConvergenceError
         Newton did not converge; ``err.report`` is a :class:`SolveReport`.
+    Interrupted
+        Ctrl-C during the solve: it stops before its next Newton iteration; ``err.report`` is
+        the :class:`SolveReport` of the iterations done (``None`` when the solve had ended).
 
     Examples
     --------
@@ -522,6 +525,8 @@ def solve_static(
             if isinstance(err.report, dict):
                 err.report = SolveReport.from_dict(err.report, body.formulation)
             raise
+        except KeyboardInterrupt as stop:
+            raise _interrupted("solve_static", stop, body) from None
         report = SolveReport.from_dict(out, body.formulation)
         check_finite_solution(out, report)
         bar.set(1, postfix=f"{plural(report.iterations, 'Newton iteration')}, {plural(report.load_steps, 'load step')}, "
@@ -535,6 +540,16 @@ def solve_static(
         element_fields=fields, tendon_tensions=out.get("tendon_tensions"),
         tendon_pulls=out.get("tendon_pulls"), contact=out.get("contact"),
     )
+
+
+def _interrupted(function: str, stop: KeyboardInterrupt, body: Body) -> Interrupted:
+    """The :class:`Interrupted` of ``function`` stopped by ``stop`` (the extension's, saying how
+    far the solve got, or Python's own KeyboardInterrupt), its report a :class:`SolveReport`."""
+    message = str(stop) if isinstance(stop, Interrupted) else "interrupted"
+    error = Interrupted(f"{function}: {message}", getattr(stop, "result", None), getattr(stop, "signal", "SIGINT"))
+    report = getattr(stop, "report", None)
+    error.report = SolveReport.from_dict(report, body.formulation) if isinstance(report, dict) else report
+    return error
 
 
 def _polyline_length(points: NDArray[np.float64]) -> float:
@@ -591,6 +606,9 @@ def actuate(
     ------
     ConvergenceError
         A step failed even after halving; ``err.results`` holds the equilibria reached.
+    Interrupted
+        Ctrl-C during a solve (it stops before its next Newton iteration); ``err.result`` holds
+        the equilibria reached, and the body's command is left at the last of them.
 
     Examples
     --------
@@ -657,6 +675,13 @@ def actuate(
                         err.report,
                     ) from err
                 continue
+            except KeyboardInterrupt as stop:
+                command(current)
+                error = _interrupted("actuate", stop, body)
+                reached = plural(len(results), "equilibrium", "equilibria")
+                error.args = (f"{error.args[0]} ({kind} = {trial:g}, after {reached} of the path)",)
+                error.result = results
+                raise error from None
             results.append(result)
             previous, current = result.positions, trial
             if trial == target:

@@ -53,6 +53,9 @@ pub enum Error {
     /// An indefinite exact Hessian during Newton is no error: Newton falls back to the
     /// projected one.
     LinearSolver { message: String },
+    /// The solve was asked to stop ([`crate::newton::NewtonOptions::interrupt`]); the report
+    /// holds what it did until then.
+    Interrupted { report: Box<SolveReport> },
 }
 
 impl Error {
@@ -116,6 +119,7 @@ impl fmt::Display for Error {
             }
             Error::NotConverged { message, .. } => write!(f, "{message}"),
             Error::LinearSolver { message } => write!(f, "sparse solver: {message}"),
+            Error::Interrupted { report } => write!(f, "{}", report.message),
         }
     }
 }

@@ -7,6 +7,9 @@
 
 use crate::error::{Error, Result};
 use crate::report::{SolveReport, Timings};
+use std::fmt;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Newton settings.
@@ -27,6 +30,50 @@ pub struct NewtonOptions {
     /// rotates (docs/theory.md, "Newton's method", has the counts). `false`: the exact Hessian
     /// of the energy.
     pub pressure_iterates: bool,
+    /// Asks the solve to stop ([`Error::Interrupted`]): polled at the start of every load step
+    /// (and of every retry after a cut-back) and of every Newton iteration. Not a setting: it
+    /// takes no part in comparing options.
+    pub interrupt: Interrupt,
+}
+
+/// A request to stop a running solve, shared between the solve (which polls it) and whoever
+/// may ask (a Ctrl-C watcher on another thread). The default asks never and costs nothing.
+#[derive(Clone, Default)]
+pub struct Interrupt(Option<Arc<AtomicBool>>);
+
+impl Interrupt {
+    /// A request not made yet; clones share it.
+    pub fn new() -> Self {
+        Interrupt(Some(Arc::new(AtomicBool::new(false))))
+    }
+
+    /// Asks every solve holding a clone of this to stop at its next poll.
+    pub fn request(&self) {
+        if let Some(flag) = &self.0 {
+            flag.store(true, Ordering::Relaxed);
+        }
+    }
+
+    pub fn is_requested(&self) -> bool {
+        self.0
+            .as_ref()
+            .is_some_and(|flag| flag.load(Ordering::Relaxed))
+    }
+}
+
+impl fmt::Debug for Interrupt {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match &self.0 {
+            None => write!(f, "Interrupt(never)"),
+            Some(_) => write!(f, "Interrupt(requested: {})", self.is_requested()),
+        }
+    }
+}
+
+impl PartialEq for Interrupt {
+    fn eq(&self, _other: &Self) -> bool {
+        true
+    }
 }
 
 impl NewtonOptions {
@@ -65,6 +112,7 @@ impl Default for NewtonOptions {
             load_steps: 1,
             max_cutbacks: 8,
             pressure_iterates: true,
+            interrupt: Interrupt::default(),
         }
     }
 }
@@ -196,7 +244,7 @@ pub fn solve(
         };
         let saved = z.clone();
         problem.set_load_factor(target, z);
-        match newton_step(problem, z, options, &mut report)? {
+        match newton_step(problem, z, options, &mut report, start)? {
             true => {
                 reached = target;
                 report.load_steps += 1;
@@ -245,7 +293,7 @@ pub fn single_iteration(
         max_iterations: 1,
         ..options.clone()
     };
-    let converged = newton_step(problem, z, &once, &mut report)?;
+    let converged = newton_step(problem, z, &once, &mut report, start)?;
     report.timings.total = start.elapsed().as_secs_f64();
     if !converged && report.step_lengths.is_empty() {
         let message = format!(
@@ -264,13 +312,17 @@ pub fn single_iteration(
     Ok(report)
 }
 
-/// Newton iterations at a fixed load factor. `Ok(false)` when they fail to converge.
+/// Newton iterations at a fixed load factor. `Ok(false)` when they fail to converge;
+/// `Err(Interrupted)` when [`NewtonOptions::interrupt`] asks to stop (`z` then holds the last
+/// accepted iterate).
 fn newton_step(
     problem: &mut dyn NewtonProblem,
     z: &mut [f64],
     options: &NewtonOptions,
     report: &mut SolveReport,
+    started: Instant,
 ) -> Result<bool> {
+    check_interrupt(options, report, started)?;
     // Element-wise work, like an assembly: timed as one.
     let t0 = Instant::now();
     if let Some(auxiliary) = problem.auxiliary() {
@@ -306,6 +358,7 @@ fn newton_step(
         {
             return Ok(true);
         }
+        check_interrupt(options, report, started)?;
         report.iterations += 1;
         let mut direction = None;
         let mut projected = !exact_next;
@@ -430,6 +483,26 @@ fn newton_step(
     Ok(g_norm <= options.tolerance * reference && problem.constraints_met(z))
 }
 
+/// `Err(Interrupted)` with the report so far when the interrupt has been requested.
+fn check_interrupt(options: &NewtonOptions, report: &SolveReport, started: Instant) -> Result<()> {
+    if !options.interrupt.is_requested() {
+        return Ok(());
+    }
+    let mut report = report.clone();
+    report.timings.total = started.elapsed().as_secs_f64();
+    report.message = format!(
+        "interrupted after {} Newton iterations{}",
+        report.iterations,
+        match report.residual_history.last() {
+            Some(r) => format!(" (relative residual {r:.3e})"),
+            None => String::new(),
+        }
+    );
+    Err(Error::Interrupted {
+        report: Box::new(report),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -503,6 +576,134 @@ mod tests {
         assert!(
             2 * evaluations_bounded < evaluations_halving,
             "{evaluations_bounded} vs {evaluations_halving}"
+        );
+    }
+
+    /// [`Hyperbola`] that requests `interrupt` during its `at`-th direction solve, as a Ctrl-C
+    /// watcher on another thread would while that iteration runs.
+    struct InterruptedDuring {
+        inner: Hyperbola,
+        interrupt: Interrupt,
+        at: usize,
+        directions: usize,
+    }
+
+    impl NewtonProblem for InterruptedDuring {
+        fn merit(&self) -> Merit {
+            self.inner.merit()
+        }
+        fn set_load_factor(&mut self, factor: f64, z: &mut [f64]) {
+            self.inner.set_load_factor(factor, z)
+        }
+        fn load_norm(&self) -> f64 {
+            self.inner.load_norm()
+        }
+        fn merit_and_gradient(&mut self, z: &mut [f64]) -> (f64, Vec<f64>) {
+            self.inner.merit_and_gradient(z)
+        }
+        fn direction(
+            &mut self,
+            z: &[f64],
+            g: &[f64],
+            projected: bool,
+            timings: &mut Timings,
+        ) -> Result<Option<Vec<f64>>> {
+            self.directions += 1;
+            if self.directions == self.at {
+                self.interrupt.request();
+            }
+            self.inner.direction(z, g, projected, timings)
+        }
+        fn step(&self, z: &mut [f64], d: &[f64], t: f64) {
+            self.inner.step(z, d, t)
+        }
+    }
+
+    #[test]
+    fn an_interrupt_stops_newton_at_the_next_iteration_with_the_report_so_far() {
+        let options = NewtonOptions {
+            tolerance: 1e-10,
+            ..Default::default()
+        };
+        let mut z_full = vec![10.0];
+        let full = solve(
+            &mut Hyperbola {
+                bound: f64::INFINITY,
+                evaluations: 0,
+            },
+            &mut z_full,
+            &options,
+        )
+        .unwrap();
+        let at = 3;
+        assert!(full.iterations > at + 2, "{} iterations", full.iterations);
+        let interrupt = Interrupt::new();
+        let mut problem = InterruptedDuring {
+            inner: Hyperbola {
+                bound: f64::INFINITY,
+                evaluations: 0,
+            },
+            interrupt: interrupt.clone(),
+            at,
+            directions: 0,
+        };
+        let mut z = vec![10.0];
+        let options = NewtonOptions {
+            interrupt,
+            ..options
+        };
+        let Err(Error::Interrupted { report }) = solve(&mut problem, &mut z, &options) else {
+            panic!("the solve was not interrupted");
+        };
+        // Iteration `at` finishes (its step is taken); the next one does not start.
+        assert_eq!(problem.directions, at);
+        assert_eq!(report.iterations, at);
+        assert!(!report.converged);
+        assert_eq!(report.step_lengths, full.step_lengths[..at]);
+        assert_eq!(report.residual_history, full.residual_history[..=at]);
+        assert!(report
+            .message
+            .starts_with("interrupted after 3 Newton iterations"));
+        // `z` is the last accepted iterate, the one the uninterrupted solve passed through.
+        let mut x: f64 = 10.0;
+        for &t in full.step_lengths.iter().take(at) {
+            let r = (1.0 + x * x).sqrt();
+            x -= t * (x / r) * (1.0 + x * x).powf(1.5);
+        }
+        assert!(
+            (z[0] - x).abs() <= 1e-12 * x.abs().max(1.0),
+            "{} vs {x}",
+            z[0]
+        );
+    }
+
+    #[test]
+    fn an_interrupt_requested_before_the_solve_stops_it_before_any_work() {
+        let interrupt = Interrupt::new();
+        interrupt.request();
+        let mut problem = Hyperbola {
+            bound: f64::INFINITY,
+            evaluations: 0,
+        };
+        let mut z = vec![10.0];
+        let options = NewtonOptions {
+            load_steps: 4,
+            interrupt,
+            ..Default::default()
+        };
+        let Err(Error::Interrupted { report }) = solve(&mut problem, &mut z, &options) else {
+            panic!("the solve was not interrupted");
+        };
+        assert_eq!((report.iterations, problem.evaluations), (0, 0));
+        assert_eq!(z, [10.0]);
+        // A default interrupt is never requested, and options compare by their settings alone.
+        assert!(!Interrupt::default().is_requested());
+        assert_eq!(
+            options,
+            NewtonOptions {
+                load_steps: 4,
+                ..Default::default()
+            }
         );
     }
 }

@@ -17,6 +17,7 @@ pub fn to_py(py: Python<'_>, error: Error) -> PyErr {
         Error::InvalidParameter { .. } => "ParameterError",
         Error::NotConverged { .. } => "ConvergenceError",
         Error::LinearSolver { .. } => "SolverError",
+        Error::Interrupted { .. } => "Interrupted",
     };
     let message = error.to_string();
     let build = || -> PyResult<PyErr> {
@@ -27,7 +28,7 @@ pub fn to_py(py: Python<'_>, error: Error) -> PyErr {
                 .call1((message.clone(), param.clone()))?,
             _ => module.getattr(class)?.call1((message.clone(),))?,
         };
-        if let Error::NotConverged { report, .. } = &error {
+        if let Error::NotConverged { report, .. } | Error::Interrupted { report } = &error {
             exception.setattr("report", report_to_dict(py, report)?)?;
         }
         Ok(PyErr::from_value(exception))
@@ -55,15 +56,18 @@ pub fn guarded<T: Send>(
 ) -> PyResult<T> {
     match py.detach(|| catch_unwind(AssertUnwindSafe(call))) {
         Ok(result) => result.py(py),
-        Err(payload) => {
-            let what = payload
-                .downcast_ref::<&str>()
-                .map(|s| s.to_string())
-                .or_else(|| payload.downcast_ref::<String>().cloned())
-                .unwrap_or_else(|| "a panic without a message".into());
-            Err(internal_error(py, &what))
-        }
+        Err(payload) => Err(from_panic(py, payload)),
     }
+}
+
+/// The [`internal_error`] of a panic's payload.
+pub fn from_panic(py: Python<'_>, payload: Box<dyn std::any::Any + Send>) -> PyErr {
+    let what = payload
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "a panic without a message".into());
+    internal_error(py, &what)
 }
 
 static INTERNAL_ERROR: PyOnceLock<Py<PyType>> = PyOnceLock::new();

@@ -1,10 +1,12 @@
 //! `sorofem._core`: the Python face of sorofem-core. Plumbing only: conversions live in
 //! `convert`, error mapping in `errors`, and every class forwards to the core: `Mesh` (`mesh`),
-//! `Model` (`model`), `SolveOptions` (`options`); the obstacle and contact checks in `contact`.
+//! `Model` (`model`), `SolveOptions` (`options`); the obstacle and contact checks in `contact`;
+//! long calls that Ctrl-C stops in `interrupt`.
 
 mod contact;
 mod convert;
 mod errors;
+mod interrupt;
 mod mesh;
 mod model;
 mod options;

@@ -1,8 +1,10 @@
 //! `Model`: a body ready to be solved many times (sorofem.model.Body owns one). Every call into
-//! the core goes through [`guarded`].
+//! the core goes through [`guarded`], or, when Ctrl-C should stop it (solves, time
+//! integration), [`interruptible`].
 
 use crate::convert;
 use crate::errors::{guarded, report_to_dict, timings_to_dict, to_py, IntoPyResult};
+use crate::interrupt::interruptible;
 use crate::mesh::Mesh;
 use crate::options::SolveOptions;
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
@@ -221,7 +223,11 @@ impl Model {
             load_steps,
         )?;
         let inner = &mut self.inner;
-        let solution = guarded(py, || {
+        let solution = interruptible(py, |interrupt| {
+            let options = CoreOptions {
+                interrupt,
+                ..options
+            };
             inner.solve(&loads, initial_flat.as_deref(), &options)
         })?;
         let out = report_to_dict(py, &solution.report)?;
@@ -394,7 +400,14 @@ impl Model {
             stiffness: stiffness_damping,
         };
         let inner = &mut self.inner;
-        let trajectory = guarded(py, || {
+        let trajectory = interruptible(py, |interrupt| {
+            let options = sorofem_core::DynamicsOptions {
+                newton: CoreOptions {
+                    interrupt,
+                    ..options.newton
+                },
+                ..options
+            };
             inner.simulate_with(
                 &loads,
                 dt,

@@ -30,6 +30,7 @@ impl SolveOptions {
             load_steps,
             max_cutbacks,
             pressure_iterates,
+            ..Default::default()
         };
         inner.validate().py(py)?;
         Ok(SolveOptions { inner })

@@ -26,7 +26,7 @@ from ._keys import CABLE_OPTIONS, MATERIAL_KEYS
 from ._spec import Checker, quoted
 
 __all__ = ["build_mesh", "build_material", "apply_fixed", "apply_loads", "apply_cables", "apply_obstacles",
-           "build_dynamics",
+           "set_cable_command", "build_dynamics",
            "build_output", "build_target", "build_estimate", "build_control"]
 
 
@@ -293,6 +293,26 @@ def apply_cables(check: Checker, entries: list[dict[str, Any]], body: Body) -> l
             key = f"cable[{match.group(1)}].{match.group(2)}" if match else "cable"
             raise check.error(key, f"could not place the cable in the mesh: {exc}") from None
     return cables
+
+
+def set_cable_command(check: Checker, prefix: str, entry: dict[str, Any], body: Body, cable: int) -> None:
+    """Give ``body``'s cable ``cable``, already built, the per-solve values of its ``[[cable]]``
+    entry: a spring chain's actuation and stiffness, a tendon's pull or tension (exactly one).
+    What a scene built ``like`` another does instead of building its cables."""
+    if entry["model"] != "tendon":
+        body.set_actuation(cable, entry["actuation"])
+        body.set_cable_stiffness(cable, entry["stiffness"])
+        return
+    if (entry["pull"] is None) == (entry["tension"] is None):
+        raise check.error(f"{prefix}.pull", "a tendon needs exactly one of pull (m) and tension (N)")
+    name = "pull" if entry["pull"] is not None else "tension"
+    try:
+        if name == "pull":
+            body.pull(cable, displacement=entry["pull"])
+        else:
+            body.pull(cable, tension=entry["tension"])
+    except ParameterError as exc:
+        raise check.error(f"{prefix}.{name}", str(exc).removeprefix(f"{exc.parameter}: ")) from None
 
 
 def build_dynamics(check: Checker, table: dict[str, Any], body: Body) -> dict[str, Any]:

@@ -35,23 +35,26 @@ from ._build import (
     build_mesh,
     build_output,
     build_target,
+    set_cable_command,
 )
 from ._keys import SCENE, defaults
 from ._spec import Checker
 
 __all__ = ["Scene", "structure_key", "PER_SOLVE_CABLE_KEYS"]
 
-#: The [[cable]] keys a built model takes at every solve (the others shape the model).
-PER_SOLVE_CABLE_KEYS = ("actuation", "stiffness")
+#: The [[cable]] keys a built model takes at every solve (the others shape the model): a spring
+#: chain's actuation and stiffness, a tendon's pull or tension.
+PER_SOLVE_CABLE_KEYS = ("actuation", "stiffness", "pull", "tension")
 
 
 def structure_key(data: Mapping[str, Any]) -> str:
     """The tables a scene's expensive objects are built from, as one JSON string: the mesh, the
-    formulation, the supports, the nodal forces, the cables (all but their actuation and
-    stiffness), the material model, the target, the obstacles and the contact settings.
+    formulation, the supports, the nodal forces, the cables (all but a spring chain's actuation
+    and stiffness and a tendon's pull or tension), the material model, the target, the
+    obstacles and the contact settings.
 
     Two scenes whose checked tables give the same key differ only in values a built model takes
-    at each solve (material values, actuations, cable stiffnesses, gravity, solver and dynamics
+    at each solve (material values, cable commands and stiffnesses, gravity, solver and dynamics
     options), so they can share a mesh and a compiled model (:meth:`Scene.from_data`'s ``like``).
     """
     cables = [{k: v for k, v in entry.items() if k not in PER_SOLVE_CABLE_KEYS} for entry in data.get("cable", [])]
@@ -233,8 +236,7 @@ class Scene:
         if like is not None:
             gravity, cables = np.array(data["loads"]["gravity"]), like.cables
             for c, entry in enumerate(data["cable"]):
-                body.set_actuation(c, entry["actuation"])
-                body.set_cable_stiffness(c, entry["stiffness"])
+                set_cable_command(check, f"cable[{c}]", entry, body, c)
         else:
             apply_fixed(check, data["fixed"], body)
             gravity = apply_loads(check, data["loads"], body)

@@ -34,7 +34,9 @@ from ..scene import PER_SOLVE_CABLE_KEYS, SCENE, Checker, Field
 
 __all__ = ["Key", "Cases", "parse_key", "parse_values", "read_scene", "missing_extra"]
 
-_PART = re.compile(r"^([A-Za-z_][A-Za-z0-9_\-]*)(?:\[(\d+)\])?$")
+#: One level of a dotted key: a name (an Ogden coefficient's with its term, ``mu:0``), optionally
+#: indexed (``cable[0]``).
+_PART = re.compile(r"^([A-Za-z_][A-Za-z0-9_\-]*(?::\d+)?)(?:\[(\d+)\])?$")
 #: Scene tables a sweep may not override: ``sorofem run`` does not read them.
 NOT_SWEPT = ("output", "target", "estimate", "control")
 #: Tables whose values a built model takes at every solve: cases differing only there share a model.

@@ -7,15 +7,19 @@ to the current maximum) or, chosen in the "colour by" dropdown, by von Mises str
 the cables as red polylines, the fixed nodes as blue points and, optionally, the rest shape or
 the surface as a wireframe in the same colours. Shift + drag on the body pulls the node under
 the pointer with a spring (:meth:`View.grab`, :meth:`View.drag_to`, :meth:`View.release`), as
-runSofa and MuJoCo's viewer do. The control panel has one slider per cable that
-moves its actuation alpha by continuation from the equilibrium shown, in steps of at most
-:data:`sorofem.cables.DEFAULT_ALPHA_STEP` as :func:`sorofem.actuate` does, and a dropdown that
-switches between the standard and the mixed formulation. A scene with ``[dynamics]`` is shown at
-its static equilibrium, and its button "simulate [dynamics]" (:meth:`View.simulate`; disabled,
-with a hint, when the scene has none) integrates the motion with the formulation and cable
-actuations set in the page, showing the steps done and a cancel button, and plays it in the same
-page with the playback controls below, until "back to static" (:meth:`View.show_static`). A
-trajectory of your own plays with :func:`view_trajectory`.
+runSofa and MuJoCo's viewer do. The control panel has one slider per cable for its command
+(the actuation alpha of a spring chain, the pull in mm or the tension in N of a tendon) that
+moves it by continuation from the equilibrium shown, as :func:`sorofem.actuate` does, and a
+dropdown that switches between the standard and the mixed formulation; the status gives each
+tendon's solved tension and pull (a slack tendon is drawn grey and said to be slack). The
+body's obstacles are drawn in translucent grey (a plane as a square around the body) and the
+contact forces as arrows, with their scale and each obstacle's total force in the panel. A
+scene with ``[dynamics]`` is shown at its static equilibrium, and its button "simulate
+[dynamics]" (:meth:`View.simulate`; disabled, with a hint, when the scene has none) integrates
+the motion with the formulation and cable actuations set in the page, showing the steps done
+and a cancel button, and plays it in the same page with the playback controls below, until
+"back to static" (:meth:`View.show_static`). A trajectory of your own plays with
+:func:`view_trajectory`.
 
 ``sorofem view`` (:func:`serve`) gives every browser tab its own view (its own body, sliders,
 checkboxes, playback and camera: :func:`serving.per_client` on viser's client handles);
@@ -57,6 +61,7 @@ Play a motion (serves on http://127.0.0.1:8080 until Ctrl-C):
 
 from __future__ import annotations
 
+import copy
 import os
 from pathlib import Path
 from typing import Any
@@ -98,7 +103,9 @@ def serve(path: str | os.PathLike[str], host: str = "127.0.0.1", port: int = 808
     ``[dynamics]`` are simulated and played), a ``.pvd`` time series, or a folder holding
     ``trajectory.pvd`` (``sorofem run``'s ``--out`` folder), which is played. Each browser tab
     gets its own view (:func:`per_client`): the scene is solved once, and each tab moves its own
-    copy of the body from that equilibrium.
+    copy of the body from that equilibrium, with a compiled model of its own (a model keeps the
+    last solve's tendon tensions, pressures and barrier stiffness as the next warm start, which
+    must not come from another tab).
     """
     viser = serving.require_viser()
     path = Path(path)
@@ -122,7 +129,9 @@ def serve(path: str | os.PathLike[str], host: str = "127.0.0.1", port: int = 808
         what = str(path)
 
         def build(client: Any) -> Any:
-            return build_view(scene, client, body=scene.body.replace(), equilibrium=equilibrium)
+            # A deep copy travels without the compiled model (Body.__getstate__), as a pickled
+            # body does: each tab builds its own.
+            return build_view(scene, client, body=copy.deepcopy(scene.body), equilibrium=equilibrium)
     server = viser.ViserServer(host=host, port=port, verbose=False)
     tabs = per_client(server, build)
     print(f"sorofem view: {what} at http://{host}:{server.get_port()} (Ctrl-C to stop)", flush=True)

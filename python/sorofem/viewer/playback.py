@@ -162,7 +162,16 @@ class TrajectoryView:
             lines.append(f"kinetic energy {f.kinetic_energy[k]:.3e} J")
         if f.actuation is not None:
             tensions = f.trajectory.cable_tensions(k) if f.trajectory is not None else None
+            # Per cable a tendon's tension, None for a spring chain (nothing without tendons).
+            per_frame = f.trajectory.cable_tension if f.trajectory is not None else []
+            tendons = per_frame[k] if k < len(per_frame) else []
             for c in range(f.n_cables):
+                tendon = tendons[c] if c < len(tendons) else None
+                if tendon is not None:
+                    pulled = f.trajectory.cable_pull[k][c]
+                    lines.append(f"cable {c} (tendon): {'**slack**, ' if tendon <= 0 else ''}tension {tendon:.4g} N, "
+                                 f"pull {pulled * 1e3:.4g} mm")
+                    continue
                 text = f"cable {c}: alpha {f.actuation[k, c]:.3f}"
                 if tensions is not None and tensions[c].size:
                     text += f", tension {tensions[c].min():.3g} .. {tensions[c].max():.3g} N"

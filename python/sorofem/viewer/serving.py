@@ -14,8 +14,9 @@ __all__ = ["require_viser", "wait_until_interrupted", "PerClient", "per_client",
 
 V = TypeVar("V")
 
-#: Held around every solve and simulation the viewer runs: the copies of a body that the tabs
-#: work on (``Body.replace``) share its compiled model, which solves one problem at a time.
+#: Held around every solve and simulation the viewer runs: views on copies of a body made by
+#: ``Body.replace`` share its compiled model, which solves one problem at a time (``sorofem
+#: view`` gives each tab a model of its own; the lock still keeps tabs from competing for cores).
 CORE_LOCK = threading.RLock()
 
 

@@ -1,6 +1,7 @@
-"""The interactive view of a scene's static equilibrium: cable sliders, the formulation, the colour
-field and its colour bar, and the button that simulates the scene's ``[dynamics]`` (with its
-progress and a cancel button) and plays the motion in place."""
+"""The interactive view of a scene's static equilibrium: cable sliders (alpha, or a tendon's pull
+or tension), the formulation, the colour field and its colour bar, the obstacles and contact
+forces, and the button that simulates the scene's ``[dynamics]`` (with its progress and a cancel
+button) and plays the motion in place."""
 
 from __future__ import annotations
 
@@ -20,20 +21,28 @@ from ..plot import COLOR_FIELDS
 from ..scene import Scene
 from ..static import StaticResult, actuate
 from .colours import colour_bar_html, colour_field, colour_range, nodal_field, surface_edges, surface_glb
+from .commands import CommandSlider, cable_lines, command_slider, is_slack
+from .contact import contact_arrows, obstacle_lines, obstacle_meshes
 from .frames import Frames
 from .playback import TrajectoryView, build_trajectory_view, simulate_in_chunks
 from .serving import CORE_LOCK, place_camera
 from .style import (
     ALPHA_RANGE,
-    ALPHA_STEP,
+    ARROW_COLOUR,
+    ARROW_HEAD,
+    ARROW_SHAFT,
     CABLE_COLOUR,
     DRAG_COLOUR,
     DRAG_ITERATIONS,
     DRAG_STIFFNESS_PER_MU,
     DRAG_TOLERANCE,
     FIXED_COLOUR,
+    OBSTACLE_COLOUR,
+    OBSTACLE_OPACITY,
+    PULL_STEP_FRACTION,
     REST_COLOUR,
     SIMULATE_LABEL,
+    SLACK_COLOUR,
     WIREFRAME_THICKNESS,
 )
 
@@ -66,8 +75,10 @@ class View:
     result
         The last equilibrium shown.
     sliders
-        One actuation slider per cable, in cable order; setting ``.value`` moves the cable
-        there from the last equilibrium (:meth:`set_actuation`).
+        One slider per cable, in cable order, for its command (:attr:`sorofem.Body.commands`):
+        the alpha of a spring chain, the pull in mm or the tension in N of a tendon
+        (:attr:`slider_specs` says which); setting ``.value`` moves the cable there from the
+        last equilibrium (:meth:`set_command`).
     formulation
         The standard/mixed dropdown; setting ``.value`` rebuilds the body and re-solves.
     surface
@@ -83,6 +94,10 @@ class View:
         that stops it (:meth:`cancel`).
     colour_bar
         HTML: the colour map of ``colour_by`` with its range and unit.
+    obstacles, arrows, contact_panel
+        One translucent mesh per obstacle of the body, the contact forces as arrows (redrawn
+        after each solve) and the side panel's markdown: the arrows' scale and each
+        obstacle's total force (both None without obstacles).
     """
 
     server: Any
@@ -92,12 +107,17 @@ class View:
     surface_faces: NDArray[np.int64]
     surface_nodes: NDArray[np.int64]
     sliders: list[Any] = field(default_factory=list)
+    #: What each slider shows (label, range, units) and how its value becomes a command.
+    slider_specs: list[CommandSlider] = field(default_factory=list)
     formulation: Any = None
     surface: Any = None
     #: The deformed surface's edges in the surface's colours (line segments; shown instead of
     #: ``surface`` to see the cables inside).
     wireframe: Any = None
     cables: list[Any] = field(default_factory=list)
+    obstacles: list[Any] = field(default_factory=list)
+    arrows: Any = None
+    contact_panel: Any = None
     status: Any = None
     #: Static solves shown so far (the initial one included).
     solves: int = 0
@@ -117,14 +137,14 @@ class View:
     wireframe_checkbox: Any = None
     progress_bar: Any = field(default=None, repr=False)  # viser's repr of it fails
     cancel_button: Any = None
-    #: Alpha steps and Newton iterations (summed over the steps) of the last slider move.
+    #: Command steps and Newton iterations (summed over the steps) of the last slider move.
     move_steps: int = 0
     move_iterations: int = 0
     #: The surface's unique edges ``(e, 2)`` in surface-node numbering (the wireframe's segments).
     surface_edges: NDArray[np.int64] = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int64),
                                           repr=False)
     _lock: threading.RLock = field(default_factory=threading.RLock, repr=False)
-    #: Slider targets not yet reached, ``{cable: alpha}``: a drag that goes on while a move runs
+    #: Slider targets not yet reached, ``{cable: command}``: a drag that goes on while a move runs
     #: redirects it instead of queueing one solve per slider position.
     _targets: dict[int, float] = field(default_factory=dict, repr=False)
     _targets_lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
@@ -161,21 +181,23 @@ class View:
         with CORE_LOCK:
             return self.scene.solve(body=body, initial=initial)
 
-    def set_actuation(self, cable: int, alpha: float) -> None:
-        """Move cable ``cable`` to actuation ``alpha`` (what its slider calls) by continuation
-        from the equilibrium shown, each solve warm-started from the last one and each
-        equilibrium shown as it is reached; a step that fails is halved, as
-        :func:`sorofem.actuate` does.
+    def set_command(self, cable: int, value: float) -> None:
+        """Move cable ``cable`` to the command ``value`` (what its slider calls): the actuation
+        alpha of a spring chain, the pull (m) or the tension (N) of a tendon, whichever drives
+        it (:attr:`sorofem.Body.commands`). It goes by continuation from the equilibrium shown,
+        each solve warm-started from the last one and each equilibrium shown as it is reached;
+        a step that fails is halved, as :func:`sorofem.actuate` does.
 
         The standard formulation goes in one step. The mixed one goes in steps of at most
-        :data:`sorofem.cables.DEFAULT_ALPHA_STEP`: its Newton iterations grow fast with the
-        step (the cable cantilever from alpha 0.3 to 0.7: 153 iterations in one step, 65 in
-        eight), while the standard one's do not (8 in one step, 46 in eight).
+        :data:`sorofem.cables.DEFAULT_ALPHA_STEP` in alpha or ``PULL_STEP_FRACTION`` of a
+        tendon's rest length in pull (a tension in one step): its Newton iterations grow fast
+        with the step (the cable cantilever from alpha 0.3 to 0.7: 153 iterations in one step,
+        65 in eight), while the standard one's do not (8 in one step, 46 in eight).
 
         A new target set meanwhile (the slider dragged on) redirects the move. A cable that
         cannot get there keeps the last equilibrium reached and the status says so."""
         with self._targets_lock:
-            self._targets[cable] = float(alpha)
+            self._targets[cable] = float(value)
             if self._moving:
                 return  # the move under way takes the new target at its next step
             self._moving = True
@@ -192,10 +214,17 @@ class View:
                 self._moving = False
             raise
 
+    #: Old name of :meth:`set_command` (from when every cable was a spring chain).
+    set_actuation = set_command
+
     def _move(self, cable: int, alpha: float) -> None:
         with self._lock:
             steps = iterations = 0
-            largest = DEFAULT_ALPHA_STEP if self.body.formulation == "mixed" else math.inf
+            kind = self.body.commands[cable][0]
+            largest = math.inf
+            if self.body.formulation == "mixed" and kind != "tension":
+                length = self.body.cables[cable].length
+                largest = DEFAULT_ALPHA_STEP if kind == "actuation" else PULL_STEP_FRACTION * length
             while (current := self.body.actuations[cable]) != alpha:
                 with self._targets_lock:
                     alpha = self._targets.pop(cable, alpha)
@@ -213,7 +242,8 @@ class View:
                     reached = getattr(exc, "results", None) or []
                     if reached:
                         self._show(reached[-1])
-                    self._report_error(f"cable {cable}: no equilibrium at alpha = {step:g} ({exc}); kept alpha = "
+                    word = {"actuation": "alpha", "pull": "pull (m)", "tension": "tension (N)"}[kind]
+                    self._report_error(f"cable {cable}: no equilibrium at {word} = {step:g} ({exc}); kept {word} = "
                                        f"{self.body.actuations[cable]:g}")
                     return
                 steps += len(path)
@@ -470,6 +500,10 @@ class View:
     def _show_static_view(self, visible: bool) -> None:
         for handle in self._static_nodes + self._static_controls:
             handle.visible = visible
+        if self.arrows is not None:  # shown only where there is contact to show
+            self.arrows.visible = False
+            if visible:
+                self._show_contact(self.result)
         if visible and self._apply_toggles is not None:
             self._apply_toggles(None)
 
@@ -524,12 +558,26 @@ class View:
                                                                                     self.colour_by))
         for c, handle in enumerate(self.cables):
             handle.points = self._cable_segments(c).astype(np.float32)
+            colour = np.array(SLACK_COLOUR if is_slack(result, c) else CABLE_COLOUR, dtype=np.uint8)
+            if not np.array_equal(handle.colors, colour):
+                handle.colors = colour
+        if self.arrows is not None:
+            self._show_contact(result)
         if self.drag_line is not None:
             if self.dragged is not None and self.drag_anchor is not None:
                 self.drag_line.points = np.array([[result.positions[self.dragged], self.drag_anchor]], dtype=np.float32)
             self.drag_line.visible = self.dragged is not None
         if self.status is not None:
             self.status.content = self._summary()
+
+    def _show_contact(self, result: StaticResult) -> None:
+        """Redraw the contact force arrows and the side panel's totals per obstacle."""
+        lo, hi = self.body.mesh.bounds
+        arrows = contact_arrows(result, float(np.linalg.norm(hi - lo)))
+        # No arrow at all is sent as one of zero length, hidden.
+        self.arrows.points = (arrows.segments if arrows.nodes.size else np.zeros((1, 2, 3))).astype(np.float32)
+        self.arrows.visible = bool(arrows.nodes.size) and self.motion is None
+        self.contact_panel.content = "  \n".join([arrows.legend, *obstacle_lines(result)])
 
     def _summary(self) -> str:
         r = self.result
@@ -539,12 +587,8 @@ class View:
             f"max |u| = {r.max_displacement * 1e3:.3g} mm",
         ]
         if self.move_steps:
-            lines.append(f"last slider move: {self.move_steps} alpha step(s), {self.move_iterations} Newton iterations")
-        for c, tension in enumerate(r.cable_tensions):
-            if r.cable_tension[c] is not None:
-                lines.append(f"cable {c} (tendon): tension {r.cable_tension[c]:.3g} N, pull {r.cable_pull[c] * 1e3:.3g} mm")
-            else:
-                lines.append(f"cable {c}: alpha {r.actuations[c]:.3f}, tension {tension.min():.3g} .. {tension.max():.3g} N")
+            lines.append(f"last slider move: {self.move_steps} step(s), {self.move_iterations} Newton iterations")
+        lines += cable_lines(r)
         if self.dragged is not None:
             lines.append(f"pulling node {self.dragged} with {np.linalg.norm(self.drag_force):.3g} N")
         return "  \n".join(lines)
@@ -574,7 +618,9 @@ def build_view(
         view`` gives each tab one, see :func:`sorofem.viewer.serving.per_client`). Nothing is
         started or blocked here.
     alpha_range
-        ``(min, max)`` of the cable sliders, widened to include each cable's actuation.
+        ``(min, max)`` of the spring cables' alpha sliders, widened to include each one's
+        actuation. A tendon's slider is its pull in mm (0 .. a quarter of its rest length) or
+        its tension in N, as its command is (``sorofem.viewer.commands.command_slider``).
     body
         The body to solve and move with the sliders (default: ``scene.body``, modified in
         place); pass ``scene.body.replace()`` to leave the scene's alone.
@@ -635,6 +681,16 @@ def build_view(
             thickness=3.0, thickness_units="screen",
         ))
     view._static_nodes += view.cables
+    for k, (vertices, triangles) in enumerate(obstacle_meshes(body)):
+        view.obstacles.append(server.scene.add_mesh_simple(
+            f"/obstacles/{k}", vertices.astype(np.float32), triangles.astype(np.uint32), color=OBSTACLE_COLOUR,
+            opacity=OBSTACLE_OPACITY, side="double",
+        ))
+    view._static_nodes += view.obstacles
+    if body.obstacles:
+        view.arrows = server.scene.add_arrows("/contact/forces", np.zeros((1, 2, 3), dtype=np.float32), ARROW_COLOUR,
+                                              shaft_radius=ARROW_SHAFT * size, head_radius=0.4 * ARROW_HEAD * size,
+                                              head_length=ARROW_HEAD * size, visible=False)
     mu = body.material.per_element(body.mesh.n_tets)[0]
     view.drag_stiffness = DRAG_STIFFNESS_PER_MU * float(np.mean(mu)) * size
     view.drag_line = server.scene.add_line_segments("/drag", np.zeros((1, 2, 3), dtype=np.float32), DRAG_COLOUR,
@@ -644,19 +700,17 @@ def build_view(
 
     gui = server.gui
     header = gui.add_markdown(f"**{scene.path.name}**: {body.mesh.n_nodes} nodes, {body.mesh.n_tets} tets, "
-                              f"{len(body.cables)} cable(s)  \nshift + drag on the body: pull a node with a "
-                              f"spring of {view.drag_stiffness:.3g} N/m")
+                              f"{len(body.cables)} cable(s), {len(body.obstacles)} obstacle(s)  \nshift + drag on the "
+                              f"body: pull a node with a spring of {view.drag_stiffness:.3g} N/m")
     view.formulation = gui.add_dropdown("formulation", list(FORMULATIONS), initial_value=body.formulation)
     view.formulation.on_update(lambda event: view.set_formulation(event.target.value))
-    for c, alpha in enumerate(body.actuations):
-        if body.cables[c].is_tendon:
-            continue  # alpha sliders drive spring cables; a tendon's pull or tension shows in the summary
-        slider = gui.add_slider(
-            f"cable {c} alpha", min=min(alpha_range[0], alpha), max=max(alpha_range[1], alpha),
-            step=ALPHA_STEP, initial_value=float(alpha), hint="1 = rest length, < 1 = pulled",
-        )
-        slider.on_update(lambda event, c=c: view.set_actuation(c, float(event.target.value)))
+    for c in range(len(body.cables)):
+        spec = command_slider(body, c, alpha_range)
+        slider = gui.add_slider(spec.label, min=spec.min, max=spec.max, step=spec.step, initial_value=spec.initial,
+                                hint=spec.hint)
+        slider.on_update(lambda event, spec=spec: view.set_command(spec.cable, spec.command(event.target.value)))
         view.sliders.append(slider)
+        view.slider_specs.append(spec)
     view.colour_dropdown = gui.add_dropdown("colour by", list(COLOR_FIELDS), initial_value=view.colour_by,
                                             hint="pressure: mixed formulation only")
     view.colour_dropdown.on_update(lambda event: view.set_colour(str(event.target.value)))
@@ -686,7 +740,11 @@ def build_view(
                                         hint="stop the simulation; the static view stays")
     view.cancel_button.on_click(lambda _: view.cancel())
     view.status = gui.add_markdown("")
+    if view.arrows is not None:
+        view.contact_panel = gui.add_markdown("")
     view._show(result, count=False)
     view._static_controls += [header, view.formulation, *view.sliders, view.colour_dropdown, view.colour_bar,
                               see_through, show_rest, view.simulate_button, view.status]
+    if view.contact_panel is not None:
+        view._static_controls.append(view.contact_panel)
     return view
