@@ -41,7 +41,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("inverse._problem",),
     ("inverse._optimizers",),
     ("inverse._analysis",),
-    ("inverse._gradient", "inverse._estimate", "inverse._control"),
+    ("inverse._gradient", "inverse._estimate", "inverse._control", "inverse._trajectory"),
     ("inverse",),
     ("scene._spec",),
     ("scene._keys",),

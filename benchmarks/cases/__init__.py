@@ -9,6 +9,7 @@ from . import cables  # noqa: F401
 from . import tendons  # noqa: F401  (tendons against spring chains, side by side)
 from . import dynamics  # noqa: F401
 from . import adjoint  # noqa: F401
+from . import trajectory  # noqa: F401  (the adjoint through time)
 from . import contact  # noqa: F401  (the cantilever on a floor, with and without it)
 from . import sweep  # noqa: F401  (sweeps on a Dask LocalCluster)
 from . import peers  # noqa: F401  (scikit-fem, and the comparison section)

@@ -34,7 +34,7 @@ from .errors import (
     SorofemError,
 )
 from .fitting import MaterialFit, fit_material
-from .inverse import control, estimate, gradient
+from .inverse import control, estimate, gradient, trajectory_gradient
 from .materials import MooneyRivlin, NeoHookean, Ogden, Yeoh
 from .mesh import Mesh
 from .meshing import tetrahedralize  # the mesher itself (optional extra) is imported on first use
@@ -80,6 +80,7 @@ __all__ = [
     "Trajectory",
     "Target",
     "gradient",
+    "trajectory_gradient",
     "estimate",
     "control",
     "sweep",

@@ -4,7 +4,7 @@ Internal API: users go through :mod:`sorofem`. Units SI, float64, node-major DOF
 ordering, index arrays int64. Errors are the classes of :mod:`sorofem.errors`.
 """
 
-from typing import Any, NotRequired, TypedDict
+from typing import Any, Callable, NotRequired, TypedDict
 
 import numpy as np
 from numpy.typing import NDArray
@@ -151,6 +151,33 @@ def _contact_reference(x: _F, dhat: float) -> dict[str, Any]:
 def material_param_names(model: str, options: dict[str, Any] | None = None) -> list[str]:
     """Parameter names of a material model ("neo_hookean": ["mu", "lambda"]), in the order
     the core stores them. Raises ParameterError for an unknown model or option."""
+
+class _TrajectoryGradient(TypedDict):
+    positions: _F
+    iterations: list[int]
+    params: _ParamGradient
+    actuation: list[list[float]]
+    mass_damping: float
+    stiffness_damping: float
+
+def trajectory_gradient(
+    model: Model,
+    gravity: _F,
+    forces: Any,
+    prescribed: Any,
+    dt: float,
+    actuation: _F,
+    objective: Callable[[_F], _F],
+    mass_damping: float = 0.0,
+    stiffness_damping: float = 0.0,
+    initial_positions: _F | None = None,
+    initial_velocities: _F | None = None,
+    tolerance: float | None = None,
+    max_iterations: int | None = None,
+    checkpoint_every: int = 0,
+) -> _TrajectoryGradient:
+    """The core's trajectory adjoint; ``objective(positions (steps + 1, n, 3))`` returns the
+    flat ``(steps + 1) 3 n`` derivative."""
 
 class SolveOptions:
     """Newton settings, validated once (ParameterError naming the bad one).

@@ -185,14 +185,14 @@ impl ElementScratch {
 }
 
 /// An active tendon constraint at the solution: its cable, `J` (free DOFs) and `H^{-1} J^T`.
-struct ActiveTendon {
-    cable: usize,
-    row: Vec<f64>,
-    solved: Vec<f64>,
+pub(crate) struct ActiveTendon {
+    pub(crate) cable: usize,
+    pub(crate) row: Vec<f64>,
+    pub(crate) solved: Vec<f64>,
 }
 
 /// `S^{-1} rhs` for the Schur complement `S_ij = J_i . H^{-1} J_j` of the active tendons.
-fn schur_solve(active: &[ActiveTendon], rhs: Vec<f64>) -> Result<Vec<f64>> {
+pub(crate) fn schur_solve(active: &[ActiveTendon], rhs: Vec<f64>) -> Result<Vec<f64>> {
     let m = active.len();
     let schur = nalgebra::DMatrix::from_fn(m, m, |i, j| dot(&active[i].row, &active[j].solved));
     schur
@@ -205,7 +205,7 @@ fn schur_solve(active: &[ActiveTendon], rhs: Vec<f64>) -> Result<Vec<f64>> {
         })
 }
 
-fn dot(a: &[f64], b: &[f64]) -> f64 {
+pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
@@ -283,7 +283,7 @@ pub(crate) fn add_derivative_along(
 impl Model {
     /// The displacement-controlled tendons taut at the last solution, with `H^{-1} J^T` from
     /// the factorisation there.
-    fn active_tendons(&self) -> Vec<ActiveTendon> {
+    pub(crate) fn active_tendons(&self) -> Vec<ActiveTendon> {
         let (z, _) = self.last_state.as_ref().expect("prepared");
         let term = &self.terms.tendons;
         let free = self.assembler.full_of_free();

@@ -1,7 +1,7 @@
 //! `sorofem._core`: the Python face of sorofem-core. Plumbing only: conversions live in
 //! `convert`, error mapping in `errors`, and every class forwards to the core: `Mesh` (`mesh`),
-//! `Model` (`model`), `SolveOptions` (`options`); the obstacle and contact checks in `contact`;
-//! long calls that Ctrl-C stops in `interrupt`.
+//! `Model` (`model`), `SolveOptions` (`options`), `trajectory_gradient` (`trajectory`); the
+//! obstacle and contact checks in `contact`; long calls that Ctrl-C stops in `interrupt`.
 
 mod contact;
 mod convert;
@@ -10,6 +10,7 @@ mod interrupt;
 mod mesh;
 mod model;
 mod options;
+mod trajectory;
 
 use errors::IntoPyResult;
 use pyo3::prelude::*;
@@ -39,6 +40,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(contact::_contact_reference, m)?)?;
     m.add_function(wrap_pyfunction!(contact::check_obstacle, m)?)?;
     m.add_function(wrap_pyfunction!(contact::check_contact, m)?)?;
+    m.add_function(wrap_pyfunction!(trajectory::trajectory_gradient, m)?)?;
     m.add_class::<mesh::Mesh>()?;
     m.add_class::<model::Model>()?;
     m.add_class::<options::SolveOptions>()?;

@@ -17,7 +17,7 @@ use std::sync::Arc;
 /// A body ready to be solved many times (see sorofem.model.Body, which owns one).
 #[pyclass(module = "sorofem._core")]
 pub struct Model {
-    inner: sorofem_core::Model,
+    pub(crate) inner: sorofem_core::Model,
 }
 
 impl Model {
@@ -48,7 +48,7 @@ impl Model {
     }
 
     /// The Newton settings of a solve: `options`, or else the keyword arguments (not both).
-    fn solve_options(
+    pub(crate) fn solve_options(
         py: Python<'_>,
         options: Option<&SolveOptions>,
         tolerance: Option<f64>,

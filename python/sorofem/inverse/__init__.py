@@ -59,6 +59,7 @@ from ._estimate import TornHistoryWarning, estimate
 from ._gradient import gradient
 from ._parameters import PARAMETERS, parameter_names
 from ._problem import DEFAULT_TOLERANCE
+from ._trajectory import TRAJECTORY_PARAMETERS, TrajectoryGradientResult, trajectory_gradient
 from .results import ControlResult, FitResult, GradientResult, Profile, Uncertainty
 
 __all__ = [
@@ -67,6 +68,9 @@ __all__ = [
     "DEFAULT_TOLERANCE",
     "PROFILE_CONDITION",
     "gradient",
+    "trajectory_gradient",
+    "TRAJECTORY_PARAMETERS",
+    "TrajectoryGradientResult",
     "estimate",
     "control",
     "GradientResult",
@@ -78,6 +82,6 @@ __all__ = [
 ]
 
 # Documented (and pickled) as members of this package, whichever private module holds them.
-for _public in (gradient, estimate, control, parameter_names, GradientResult, FitResult, ControlResult, Uncertainty,
+for _public in (gradient, trajectory_gradient, TrajectoryGradientResult, estimate, control, parameter_names, GradientResult, FitResult, ControlResult, Uncertainty,
                 Profile, TornHistoryWarning):
     _public.__module__ = __name__

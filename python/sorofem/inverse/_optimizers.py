@@ -238,11 +238,21 @@ def uncertainty(
     cov_s = np.full((p, p), np.nan)
     weak = np.zeros(p, dtype=bool)
     if free.any():
-        _, sv, vt = np.linalg.svd(J_s[:, free], full_matrices=False)
+        # The columns are in the optimiser's variables, which mix units (a log-space modulus is
+        # per relative change, a sign-free coefficient per Pa): equilibrated to unit norm, the
+        # rank test and the weak directions do not depend on those units.
+        columns = J_s[:, free]
+        norms = np.linalg.norm(columns, axis=0)
+        scale = np.where(norms > 0, norms, 1.0)
+        _, sv, vt = np.linalg.svd(columns / scale, full_matrices=False)
         null = sv <= 1e-6 * (sv[0] if sv.size and sv[0] > 0 else 1.0)
+        if sv.size < norms.size:
+            null = np.r_[null, np.ones(norms.size - sv.size, dtype=bool)]
+            vt = np.vstack([vt, np.linalg.svd(columns / scale)[2][sv.size:]])
+            sv = np.r_[sv, np.zeros(norms.size - sv.size)]
         good = ~null
         inv_sq = 1.0 / np.where(null, 1.0, sv) ** 2
-        sub = np.einsum("ki,k,kj->ij", vt[good], inv_sq[good], vt[good]) * sigma**2
+        sub = np.einsum("ki,k,kj->ij", vt[good], inv_sq[good], vt[good]) * sigma**2 / np.outer(scale, scale)
         # Directions the data do not see: those parameters get an infinite variance.
         weak_free = np.any(np.abs(vt[null]) > 1e-2, axis=0) if null.any() else np.zeros(int(free.sum()), dtype=bool)
         sub[weak_free, :] = np.inf

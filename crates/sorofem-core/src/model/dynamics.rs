@@ -170,7 +170,7 @@ pub(crate) struct StepSetup {
     /// Mass (kg) of each free DOF (zero on pressures).
     pub(crate) mass: Vec<f64>,
     /// Position of each free DOF's diagonal entry in the Hessian pattern.
-    diagonal: Vec<usize>,
+    pub(crate) diagonal: Vec<usize>,
     /// Free DOFs that are displacements (the pressures, mixed only, come after them).
     pub(crate) n_displacement: usize,
     pub(crate) full_load: Vec<f64>,
@@ -264,18 +264,7 @@ impl Model {
         self.save_frame(setup, &state, 0.0, &mut trajectory);
         let mut time = 0.0;
         for (s, alphas) in actuation.iter().enumerate() {
-            for (c, &value) in alphas.iter().enumerate() {
-                match self.cable_slot(c)? {
-                    CableSlot::Springs(_) => self.set_actuation(c, value)?,
-                    CableSlot::Tendon(_) => {
-                        let command = match self.tendon_command(c)? {
-                            TendonCommand::Pull(_) => TendonCommand::Pull(value),
-                            TendonCommand::Tension(_) => TendonCommand::Tension(value),
-                        };
-                        self.set_tendon_command(c, command)?;
-                    }
-                }
-            }
+            self.set_step_commands(alphas)?;
             // Halve the step on failure: a queue of sub-steps that must add up to dt.
             let mut pending = vec![(dt, 0usize)];
             let (mut iterations, mut factorizations, mut residual) = (0, 0, 0.0);
@@ -364,6 +353,24 @@ impl Model {
             reuse,
         });
         Ok(trajectory)
+    }
+
+    /// Sets every cable's command of one step: `values[c]` is cable c's alpha (spring cables),
+    /// pull (m) or tension (N) (tendons, whichever their command is).
+    pub(crate) fn set_step_commands(&mut self, values: &[f64]) -> Result<()> {
+        for (c, &value) in values.iter().enumerate() {
+            match self.cable_slot(c)? {
+                CableSlot::Springs(_) => self.set_actuation(c, value)?,
+                CableSlot::Tendon(_) => {
+                    let command = match self.tendon_command(c)? {
+                        TendonCommand::Pull(_) => TendonCommand::Pull(value),
+                        TendonCommand::Tension(_) => TendonCommand::Tension(value),
+                    };
+                    self.set_tendon_command(c, command)?;
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Checks the arguments of a simulation and gathers what its steps share.

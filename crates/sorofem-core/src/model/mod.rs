@@ -13,6 +13,7 @@ pub mod statics;
 mod system;
 mod tendons;
 pub(crate) mod terms;
+pub mod trajectory;
 
 pub use contact::ContactReport;
 pub use dynamics::{ContactFrame, Damping, DynamicsOptions, StepMethod, Trajectory};

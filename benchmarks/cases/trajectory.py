@@ -1,0 +1,88 @@
+"""The trajectory gradient (discrete adjoint of implicit Euler) of the standard hammerbot's swing,
+against the forward simulation."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from harness import TABLES, Column, Row, Table, case, col, fmt, mib, ratio, status
+
+from .common import HAMMERBOT_GRAVITY, HAMMERBOT_MATERIAL, hammerbot_mesh
+
+TABLES["trajectory"] = Table(
+    "Trajectory gradient (sorofem)",
+    "The standard hammerbot (E = 100 kPa, nu = 0.4, rho = 1070 kg/m^3) released from rest under gravity, "
+    "Rayleigh damping (1.0 1/s, 1e-3 s), 100 steps of 10 ms. Objective J = sum over the frames of the "
+    "tip nodes' mean y-displacement squared; gradient by `sf.trajectory_gradient` with respect to "
+    "Young's modulus, Poisson's ratio, density and both Rayleigh coefficients: its own forward pass "
+    "(every step full Newton to 1e-10, unsplit), checkpoints every ceil(sqrt(steps)) = 10 states, the "
+    "backward sweep recomputing the states inside each segment and factorising each step's Hessian once; "
+    "with `checkpoint_every=1` every state is kept and none recomputed. Forward = "
+    "`sf.simulate` with the defaults (`modified`, tolerance 1e-8) and with the gradient's accuracy "
+    "(`newton`, 1e-10). One run each. Memory for 1000 steps = the checkpointed states "
+    "(ceil(sqrt(1000)) = 32 checkpoints + the last state + one 32-step segment, each the full DOFs plus the free DOFs' "
+    "velocities) besides the 1001 frames of node positions the objective reads.",
+    (
+        col("case", "case", str),
+        col("tets", "tets"),
+        Column("conv.", status),
+        col("steps", "steps"),
+        col("forward, default [s]", "seconds_forward"),
+        col("forward, newton 1e-10 [s]", "seconds_forward_tight"),
+        col("gradient [s]", "seconds"),
+        col("gradient, every state kept [s]", "seconds_all_states"),
+        Column("gradient / forward default", lambda r: fmt(ratio(r.get("seconds"), r.get("seconds_forward")))),
+        Column("gradient / forward newton 1e-10",
+               lambda r: fmt(ratio(r.get("seconds"), r.get("seconds_forward_tight")))),
+        Column("every state kept / forward default",
+               lambda r: fmt(ratio(r.get("seconds_all_states"), r.get("seconds_forward")))),
+        col("states kept, 1000 steps [MiB]", "checkpoint_mib_1000"),
+        col("positions, 1000 steps [MiB]", "positions_mib_1000"),
+        Column("peak RSS [MiB]", mib),
+    ),
+)
+
+STEPS, DT, DAMPING = 100, 0.01, (1.0, 1e-3)
+
+
+@case("sorofem/hammerbot-trajectory-gradient", "trajectory")
+def sorofem_hammerbot_trajectory_gradient() -> Row:
+    import sorofem as sf
+
+    mesh, fixed = hammerbot_mesh()
+    material = sf.NeoHookean(**HAMMERBOT_MATERIAL)
+    tip = np.flatnonzero(np.abs(mesh.points[:, 0] - mesh.points[:, 0].max()) < 1e-9)
+
+    def objective(x: np.ndarray) -> tuple[float, np.ndarray]:
+        u = (x[:, tip, 1] - mesh.points[tip, 1]).mean(axis=1)
+        d = np.zeros_like(x)
+        d[:, tip, 1] = 2.0 * u[:, None] / tip.size
+        return float(np.sum(u * u)), d
+
+    def body() -> sf.Body:
+        b = sf.Body(mesh, material)
+        b.fix(fixed)
+        return b
+
+    kwargs = dict(gravity=HAMMERBOT_GRAVITY, damping=DAMPING)
+    t0 = time.perf_counter()
+    forward = sf.simulate(body(), DT, STEPS, **kwargs)
+    t1 = time.perf_counter()
+    sf.simulate(body(), DT, STEPS, method="newton", tolerance=1e-10, **kwargs)
+    t2 = time.perf_counter()
+    names = ["youngs_modulus", "poisson_ratio", "density", "mass_damping", "stiffness_damping"]
+    g = sf.trajectory_gradient(body(), objective, names, dt=DT, steps=STEPS, **kwargs)
+    t3 = time.perf_counter()
+    sf.trajectory_gradient(body(), objective, names, dt=DT, steps=STEPS, checkpoint_every=1, **kwargs)
+    t4 = time.perf_counter()
+    n_full = 3 * mesh.n_nodes
+    kept = (32 + 1 + 32) * 2 * n_full * 8
+    return {
+        "tets": mesh.n_tets, "steps": STEPS, "converged": bool(np.isfinite(forward.positions).all()),
+        "seconds_forward": t1 - t0, "seconds_forward_tight": t2 - t1, "seconds": t3 - t2, "seconds_all_states": t4 - t3,
+        "checkpoint_mib_1000": round(kept / 2**20, 1), "positions_mib_1000": round(1001 * n_full * 8 / 2**20, 1),
+        "gradient": {k: float(np.ravel(v)[0]) for k, v in g.gradient.items()},
+        "mean_iterations_per_step": float(np.mean(g.iterations)),
+    }

@@ -1,0 +1,515 @@
+//! The gradient of an objective of a whole trajectory by the discrete adjoint of its implicit
+//! Euler steps (docs/theory.md, "Trajectory adjoint").
+//!
+//! Step k (length h, free DOFs u, the mixed formulation's pressures among them) ends where its
+//! residual vanishes:
+//!
+//! ```text
+//! r_k = M (u_{k+1} - u_k - h v_k) / h^2 + alpha_M M (u_{k+1} - u_k) / h
+//!     + s F(z_{k+1}) + T(z_{k+1}) - f - beta_K / h P F(z_k) = 0,     v_k = (u_k - u_{k-1}) / h
+//! ```
+//!
+//! with `s = 1 + beta_K / h`, F the elastic and spring-cable force (N), T the tendons' force,
+//! f the loads and P the projection on the displacement rows. For `J = sum_k phi_k(x_k)` the
+//! adjoint states `lambda_k` (one per step, free DOFs) solve, from the last step back,
+//!
+//! ```text
+//! H_k lambda_k = dphi_{k+1}/du + (2 M / h^2 + alpha_M M / h) lambda_{k+1} - M / h^2 lambda_{k+2}
+//!              + beta_K / h K_F(z_{k+1}) P lambda_{k+1}
+//! ```
+//!
+//! (`H_k = dr_k/du_{k+1}`, the step's own Hessian at its converged end; taut
+//! displacement-controlled tendons border it as in [`crate::sensitivity`]), and
+//! `dJ/dtheta = -sum_k lambda_k . dr_k/dtheta`, whose parameter derivatives come from the
+//! registry's [`crate::energy::ParamTerm`]s (at `z_{k+1}`, and at `z_k` for the start force),
+//! from the lumped mass (`density`) and from the damping coefficients.
+//!
+//! Memory: the states of every `every`-th step and the last are kept (checkpoints) and the
+//! states inside a segment are recomputed from its checkpoint in the backward sweep, so at most
+//! `steps / every + every + 1` states of `n_full + n_free` values are held (`every ~
+//! sqrt(steps)`: about `2 sqrt(steps)` states; `every = 1` keeps every state and recomputes
+//! none), besides the node positions of every step that the objective reads (`(steps + 1) 3 n`).
+
+use super::dynamics::{Damping, DynamicsOptions, StepMethod, StepSetup, StepState};
+use super::system::FactorReuse;
+use super::{Loads, Model};
+use crate::energy::{HessianMode, TendonCommand};
+use crate::error::{check_finite, Error, Result};
+use crate::newton::NewtonOptions;
+use crate::sensitivity::{add_contraction, dot, schur_solve, ParamLayout, ParamVector};
+
+/// `dJ/dtheta` of a trajectory objective.
+#[derive(Clone, Debug, Default)]
+pub struct TrajectoryGradient {
+    /// The parameter blocks of [`Model::param_zeros`], summed over the steps (`cable_actuation`,
+    /// `cable_tension` and `cable_pull` too: the gradient of a command held over the run).
+    pub params: ParamVector,
+    /// `dJ/d command[s][c]`: each step's alpha (spring cables), pull (m) or tension (N).
+    pub actuation: Vec<Vec<f64>>,
+    /// `dJ/d alpha_M` (per 1/s) and `dJ/d beta_K` (per s).
+    pub mass_damping: f64,
+    pub stiffness_damping: f64,
+}
+
+/// A run's node positions (m, 3 n per frame, the initial one first) and Newton iterations
+/// per step.
+#[derive(Clone, Debug, Default)]
+pub struct RecordedPositions {
+    pub positions: Vec<Vec<f64>>,
+    pub iterations: Vec<usize>,
+}
+
+/// The state at the start of a step and the tendons' tensions there.
+#[derive(Clone)]
+struct Checkpoint {
+    state: StepState,
+    tensions: Vec<f64>,
+}
+
+impl Model {
+    /// The gradient of an objective `J(x_0, ..., x_steps)` (its value is the caller's) along the
+    /// simulation of [`Model::simulate_with`] with these arguments, every step solved by full Newton to
+    /// `newton.tolerance` (the adjoint is exact at converged states only). `objective` receives
+    /// the node positions of every frame (3 n each, m) and returns `dJ/dx` of every frame
+    /// (`(steps + 1) 3 n` values, J's unit per m), or `None` to stop (its error is the caller's).
+    /// `checkpoint_every` (0: `ceil(sqrt(steps))`) sets the memory (see the module docs).
+    ///
+    /// Not differentiated (an error names them): contact, cable dashpots, steps that must be
+    /// halved to converge.
+    #[allow(clippy::too_many_arguments)]
+    pub fn trajectory_gradient<F>(
+        &mut self,
+        loads: &Loads,
+        dt: f64,
+        actuation: &[Vec<f64>],
+        damping: Damping,
+        initial_positions: Option<&[f64]>,
+        initial_velocities: Option<&[f64]>,
+        newton: &NewtonOptions,
+        checkpoint_every: usize,
+        objective: F,
+    ) -> Result<(RecordedPositions, TrajectoryGradient)>
+    where
+        F: FnOnce(&RecordedPositions) -> Option<Vec<f64>>,
+    {
+        let steps = actuation.len();
+        if steps == 0 {
+            return Err(Error::invalid("steps", "at least one time step", 0));
+        }
+        self.check_differentiable()?;
+        let options = DynamicsOptions {
+            newton: newton.clone(),
+            method: StepMethod::Newton,
+            save_every: 1,
+        };
+        let setup = self.step_setup(loads, dt, steps, actuation, damping, &options)?;
+        let every = match checkpoint_every {
+            0 => ((steps as f64).sqrt().ceil() as usize).max(1),
+            k => k,
+        };
+        self.continuation = None;
+        let saved_tensions = self.tendon_tensions();
+        let (mut state, _) = self.start_of_run(&setup, initial_positions, initial_velocities)?;
+        let mut record = RecordedPositions {
+            positions: vec![self.node_positions(&state.z)],
+            iterations: Vec::with_capacity(steps),
+        };
+        let mut checkpoints = Vec::new();
+        for (s, commands) in actuation.iter().enumerate() {
+            if s % every == 0 {
+                checkpoints.push(Checkpoint {
+                    state: state.clone(),
+                    tensions: self.tendon_tensions(),
+                });
+            }
+            record
+                .iterations
+                .push(self.converged_step(&setup, &mut state, dt, s, commands)?);
+            record.positions.push(self.node_positions(&state.z));
+        }
+        // The last state closes the last segment: no segment recomputes its own end.
+        checkpoints.push(Checkpoint {
+            state,
+            tensions: self.tendon_tensions(),
+        });
+        let n3 = 3 * self.mesh.n_nodes();
+        let d_positions = objective(&record)
+            .ok_or_else(|| Error::invalid("objective", "a derivative for every frame", "none"))?;
+        if d_positions.len() != (steps + 1) * n3 {
+            return Err(Error::shape(
+                "objective",
+                format!("({}, {}, 3)", steps + 1, n3 / 3),
+                format!("{} values", d_positions.len()),
+            ));
+        }
+        check_finite("objective", &d_positions)?;
+        let gradient = self.backward(
+            &setup,
+            loads,
+            dt,
+            actuation,
+            &checkpoints,
+            every,
+            &d_positions,
+        );
+        self.last_state = None;
+        self.factor_at_solution = false;
+        for (tendon, t) in self.terms.tendons.tendons.iter_mut().zip(saved_tensions) {
+            tendon.tension = t;
+        }
+        Ok((record, gradient?))
+    }
+
+    fn check_differentiable(&self) -> Result<()> {
+        if self.terms.contact.is_some() {
+            return Err(Error::invalid(
+                "obstacles",
+                "a body without obstacles (trajectory gradients through contact are not implemented)",
+                "a body with obstacles",
+            ));
+        }
+        if let Some(c) = self
+            .terms
+            .cables
+            .cables
+            .iter()
+            .position(|c| c.damping > 0.0)
+        {
+            return Err(Error::invalid(
+                "cable damping",
+                "cables without dashpots (trajectory gradients through cable damping are not implemented)",
+                format!("spring cable {c} with damping {}", self.terms.cables.cables[c].damping),
+            ));
+        }
+        Ok(())
+    }
+
+    fn tendon_tensions(&self) -> Vec<f64> {
+        self.terms
+            .tendons
+            .tendons
+            .iter()
+            .map(|t| t.tension)
+            .collect()
+    }
+
+    fn node_positions(&self, z: &[f64]) -> Vec<f64> {
+        let rest = self.mesh.rest_flat();
+        rest.iter().zip(z).map(|(x, u)| x + u).collect()
+    }
+
+    /// One step solved to the tolerance, unsplit; its Newton iterations.
+    fn converged_step(
+        &mut self,
+        setup: &StepSetup,
+        state: &mut StepState,
+        dt: f64,
+        s: usize,
+        commands: &[f64],
+    ) -> Result<usize> {
+        self.set_step_commands(commands)?;
+        let mut reuse = FactorReuse::new(0.25);
+        match self.time_step(setup, state, dt, &mut reuse, &mut Vec::new()) {
+            Ok(report) => Ok(report.iterations),
+            Err(Error::NotConverged { mut report, .. }) => {
+                let message = format!(
+                    "time step {s} (t = {:.4} s) did not converge at dt = {dt:.3e} s (a trajectory gradient does not split steps: choose a smaller dt); last relative residuals: {:?}",
+                    s as f64 * dt,
+                    report.residual_history.iter().rev().take(5).rev().map(|r| format!("{r:.3e}")).collect::<Vec<_>>()
+                );
+                report.message = message.clone();
+                Err(Error::NotConverged { message, report })
+            }
+            Err(other) => Err(other),
+        }
+    }
+
+    /// The adjoint sweep over the segments between checkpoints, last first.
+    #[allow(clippy::too_many_arguments)]
+    fn backward(
+        &mut self,
+        setup: &StepSetup,
+        loads: &Loads,
+        dt: f64,
+        actuation: &[Vec<f64>],
+        checkpoints: &[Checkpoint],
+        every: usize,
+        d_positions: &[f64],
+    ) -> Result<TrajectoryGradient> {
+        let steps = actuation.len();
+        let n_free = setup.free.len();
+        let layout = {
+            let load_terms = self.terms.loads(loads);
+            ParamLayout::new(&self.terms.parameterised(&load_terms))
+        };
+        let mut sweep = Sweep {
+            flat: vec![0.0; layout.len],
+            actuation: vec![vec![0.0; self.n_cables()]; steps],
+            mass_damping: 0.0,
+            stiffness_damping: 0.0,
+            next: vec![0.0; n_free],
+            after_next: vec![0.0; n_free],
+            start_force_term: vec![0.0; n_free],
+        };
+        for (segment, ends) in checkpoints.windows(2).enumerate().rev() {
+            let (checkpoint, next) = (&ends[0], &ends[1]);
+            let first = segment * every;
+            let last = (first + every).min(steps);
+            let mut state = checkpoint.state.clone();
+            for (tendon, &t) in self
+                .terms
+                .tendons
+                .tendons
+                .iter_mut()
+                .zip(&checkpoint.tensions)
+            {
+                tendon.tension = t;
+            }
+            let mut states = vec![(state.clone(), checkpoint.tensions.clone())];
+            for (s, commands) in actuation.iter().enumerate().take(last - 1).skip(first) {
+                self.converged_step(setup, &mut state, dt, s, commands)?;
+                states.push((state.clone(), self.tendon_tensions()));
+            }
+            states.push((next.state.clone(), next.tensions.clone()));
+            for k in (first..last).rev() {
+                let (start, _) = &states[k - first];
+                let (end, tensions) = &states[k + 1 - first];
+                let frame = &d_positions[(k + 1) * 3 * self.mesh.n_nodes()..];
+                self.adjoint_step(
+                    setup,
+                    loads,
+                    &layout,
+                    dt,
+                    k,
+                    &actuation[k],
+                    start,
+                    end,
+                    tensions,
+                    frame,
+                    &mut sweep,
+                )?;
+            }
+        }
+        Ok(TrajectoryGradient {
+            params: layout.unflatten(&sweep.flat),
+            actuation: sweep.actuation,
+            mass_damping: sweep.mass_damping,
+            stiffness_damping: sweep.stiffness_damping,
+        })
+    }
+
+    /// Step k of the adjoint sweep: `lambda_k` from the step's Hessian at its end, then its
+    /// share of every derivative.
+    #[allow(clippy::too_many_arguments)]
+    fn adjoint_step(
+        &mut self,
+        setup: &StepSetup,
+        loads: &Loads,
+        layout: &ParamLayout,
+        h: f64,
+        k: usize,
+        commands: &[f64],
+        start: &StepState,
+        end: &StepState,
+        end_tensions: &[f64],
+        d_frame: &[f64],
+        sweep: &mut Sweep,
+    ) -> Result<()> {
+        self.set_step_commands(commands)?;
+        let n3 = 3 * self.mesh.n_nodes();
+        let (alpha_m, beta_k) = (setup.damping.mass, setup.damping.stiffness);
+        let scale = 1.0 + beta_k / h;
+        let (z0, z1) = (&start.z, &end.z);
+        let n_free = setup.free.len();
+        // The tendons as the step's solve had them at its end, their tensions (multipliers or
+        // commands) divided by the internal scale: their force is the motor's, not damped.
+        for (tendon, &t) in self.terms.tendons.tendons.iter_mut().zip(end_tensions) {
+            tendon.tension = match tendon.command {
+                TendonCommand::Pull(_) => t / scale,
+                TendonCommand::Tension(command) => command / scale,
+            };
+        }
+        let mut eval =
+            self.assembler
+                .evaluate(&self.terms.internal(), z1, true, Some(HessianMode::Exact));
+        eval.hessian.iter_mut().for_each(|v| *v *= scale);
+        for (f, &p) in setup.diagonal.iter().enumerate() {
+            eval.hessian[p] += setup.mass[f] / (h * h) + alpha_m * setup.mass[f] / h;
+        }
+        if !self
+            .factor
+            .factor(self.assembler.pattern(), &eval.hessian)?
+        {
+            return Err(Error::LinearSolver {
+                message: format!("the Hessian of time step {k} is singular at its end: the trajectory gradient is undefined there"),
+            });
+        }
+        // The damped internal force at the end (what beta_K scales): the tendons' out.
+        let mut damped_force = eval.gradient;
+        let mut tendon_force = vec![0.0; z1.len()];
+        for tendon in &self.terms.tendons.tendons {
+            tendon.add_length_gradient(z1, tendon.tension, &mut tendon_force);
+        }
+        for (g, &d) in damped_force.iter_mut().zip(&setup.free) {
+            *g -= tendon_force[d];
+        }
+
+        let mut lambda: Vec<f64> = (0..n_free)
+            .map(|f| {
+                let d = setup.free[f];
+                let m = setup.mass[f];
+                let objective = if d < n3 { d_frame[d] } else { 0.0 };
+                objective + (2.0 * m / (h * h) + alpha_m * m / h) * sweep.next[f]
+                    - m / (h * h) * sweep.after_next[f]
+                    + sweep.start_force_term[f]
+            })
+            .collect();
+        self.factor.solve_in_place(&mut lambda);
+        self.last_state = Some((z1.clone(), loads.clone()));
+        // Taut displacement-controlled tendons: lambda stays on their constraints, and
+        // dJ/d pull = -mu.
+        let active = self.active_tendons();
+        let mut pull_gradients = Vec::new();
+        if !active.is_empty() {
+            let mu = schur_solve(
+                &active,
+                active.iter().map(|a| dot(&a.row, &lambda)).collect(),
+            )?;
+            for (a, m) in active.iter().zip(&mu) {
+                for (l, s) in lambda.iter_mut().zip(&a.solved) {
+                    *l -= m * s;
+                }
+                pull_gradients.push((a.cable, -m));
+            }
+        }
+
+        // The start force beta_K / h P F(z_k), with every tendon out of the internal force.
+        for tendon in &mut self.terms.tendons.tendons {
+            tendon.tension = 0.0;
+        }
+        let start_eval = self.assembler.evaluate(
+            &self.terms.internal(),
+            z0,
+            true,
+            (beta_k > 0.0).then_some(HessianMode::Exact),
+        );
+        let projected: Vec<f64> = (0..n_free)
+            .map(|f| {
+                if f < setup.n_displacement {
+                    lambda[f]
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        sweep.start_force_term = if beta_k > 0.0 {
+            let product = self
+                .assembler
+                .pattern()
+                .symmetric_matvec(&start_eval.hessian, &projected);
+            product.iter().map(|v| beta_k / h * v).collect()
+        } else {
+            vec![0.0; n_free]
+        };
+
+        let mut at_end = vec![0.0; z1.len()];
+        let mut at_start = vec![0.0; z1.len()];
+        for (f, &d) in setup.free.iter().enumerate() {
+            at_end[d] = -lambda[f];
+            at_start[d] = beta_k / h * projected[f];
+        }
+        let load_terms = self.terms.loads(loads);
+        let terms = self.terms.parameterised(&load_terms);
+        let mut flat = vec![0.0; layout.len];
+        // The registry's order: elastic, gravity, point gravity, spring cables, tendons; the
+        // elastic and spring-cable forces carry the internal scale and the start force.
+        for (i, (term, offsets)) in terms.iter().zip(&layout.term_offsets).enumerate() {
+            let internal = i == 0 || i == 3;
+            let w: Vec<f64> = if internal {
+                at_end.iter().map(|v| scale * v).collect()
+            } else {
+                at_end.clone()
+            };
+            add_contraction(*term, offsets, z1, &w, &mut flat);
+            if internal && beta_k > 0.0 {
+                add_contraction(*term, offsets, z0, &at_start, &mut flat);
+            }
+        }
+        // The lumped mass: d(M a)/d rho_e = V_e / 4 a on each of the tet's nodes.
+        let mut inertial = vec![0.0; z1.len()];
+        for (f, &d) in setup.free.iter().enumerate().take(setup.n_displacement) {
+            let acceleration =
+                (end.velocity[f] - start.velocity[f]) / h + alpha_m * end.velocity[f];
+            inertial[d] = -lambda[f] * acceleration;
+        }
+        let (_, density_offset, _) = layout
+            .blocks
+            .iter()
+            .find(|b| b.0 == "density")
+            .cloned()
+            .expect("the gravity term's density block");
+        for (e, tet) in self.mesh.tets().iter().enumerate() {
+            let share = self.terms.mass.nodal_volume(e);
+            let sum: f64 = tet
+                .iter()
+                .flat_map(|&a| (0..3).map(move |i| 3 * a + i))
+                .map(|d| inertial[d])
+                .sum();
+            flat[density_offset + e] += share * sum;
+        }
+        let pull_offset = layout
+            .blocks
+            .iter()
+            .find(|b| b.0 == "cable_pull")
+            .expect("the tendons' block")
+            .1;
+        for (c, g) in pull_gradients {
+            flat[pull_offset + c] += g;
+            sweep.actuation[k][c] += g;
+        }
+        for c in 0..self.n_cables() {
+            let block = match self.cable_slot(c)? {
+                crate::cables::CableSlot::Springs(_) => "cable_actuation",
+                crate::cables::CableSlot::Tendon(_) => match self.tendon_command(c)? {
+                    TendonCommand::Tension(_) => "cable_tension",
+                    TendonCommand::Pull(_) => continue,
+                },
+            };
+            let offset = layout
+                .blocks
+                .iter()
+                .find(|b| b.0 == block)
+                .expect("cable block")
+                .1;
+            sweep.actuation[k][c] += flat[offset + c];
+        }
+        for (total, v) in sweep.flat.iter_mut().zip(&flat) {
+            *total += v;
+        }
+        for (f, l) in lambda.iter().enumerate() {
+            let velocity = end.velocity[f];
+            sweep.mass_damping -= l * setup.mass[f] * velocity;
+            let start_force = if f < setup.n_displacement {
+                start_eval.gradient[f]
+            } else {
+                0.0
+            };
+            sweep.stiffness_damping -= l * (damped_force[f] - start_force) / h;
+        }
+        sweep.after_next = std::mem::replace(&mut sweep.next, lambda);
+        Ok(())
+    }
+}
+
+/// What the backward sweep carries from step to step.
+struct Sweep {
+    flat: Vec<f64>,
+    actuation: Vec<Vec<f64>>,
+    mass_damping: f64,
+    stiffness_damping: f64,
+    /// `lambda_{k+1}` and `lambda_{k+2}` (free DOFs).
+    next: Vec<f64>,
+    after_next: Vec<f64>,
+    /// `beta_K / h K_F(z_{k+1}) P lambda_{k+1}`.
+    start_force_term: Vec<f64>,
+}

@@ -1,0 +1,104 @@
+//! `trajectory_gradient`: the core's trajectory adjoint, the objective called back into Python.
+
+use crate::convert;
+use crate::errors::{guarded, IntoPyResult};
+use crate::model::Model;
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::sync::Mutex;
+
+/// The gradient of a trajectory objective (see `Model::trajectory_gradient` in the core).
+/// `objective(positions (steps + 1, n, 3)) -> d objective / d positions` as a flat float64
+/// array of `(steps + 1) 3 n` values (checked by the caller). Returns {"positions",
+/// "iterations", "params" (as `Model.adjoint`), "actuation" (steps, cables), "mass_damping",
+/// "stiffness_damping"}. An exception of the objective propagates unchanged.
+#[pyfunction]
+#[pyo3(signature = (model, gravity, forces, prescribed, dt, actuation, objective, mass_damping = 0.0, stiffness_damping = 0.0, initial_positions = None, initial_velocities = None, tolerance = None, max_iterations = None, checkpoint_every = 0))]
+#[allow(clippy::too_many_arguments)]
+pub fn trajectory_gradient<'py>(
+    py: Python<'py>,
+    mut model: PyRefMut<'py, Model>,
+    gravity: &Bound<'py, PyAny>,
+    forces: &Bound<'py, PyAny>,
+    prescribed: &Bound<'py, PyAny>,
+    dt: f64,
+    actuation: &Bound<'py, PyAny>,
+    objective: Py<PyAny>,
+    mass_damping: f64,
+    stiffness_damping: f64,
+    initial_positions: Option<&Bound<'py, PyAny>>,
+    initial_velocities: Option<&Bound<'py, PyAny>>,
+    tolerance: Option<f64>,
+    max_iterations: Option<usize>,
+    checkpoint_every: usize,
+) -> PyResult<Bound<'py, PyDict>> {
+    let n = model.inner.mesh().n_nodes();
+    let loads = convert::loads(py, n, gravity, forces, prescribed)?;
+    let actuation = convert::matrix("actuation", actuation, Some(model.inner.n_cables())).py(py)?;
+    let flat = |param: &str, a: Option<&Bound<'py, PyAny>>| -> PyResult<Option<Vec<f64>>> {
+        a.filter(|a| !a.is_none())
+            .map(|a| convert::points(param, a).map(|p| p.into_iter().flatten().collect()))
+            .transpose()
+            .py(py)
+    };
+    let x0 = flat("initial_positions", initial_positions)?;
+    let v0 = flat("initial_velocities", initial_velocities)?;
+    let newton = Model::solve_options(py, None, tolerance, max_iterations, None)?;
+    let damping = sorofem_core::Damping {
+        mass: mass_damping,
+        stiffness: stiffness_damping,
+    };
+    let raised: Mutex<Option<PyErr>> = Mutex::new(None);
+    let call = |record: &sorofem_core::model::trajectory::RecordedPositions| -> Option<Vec<f64>> {
+        Python::attach(|py| {
+            let frames = record.positions.len();
+            let positions: Vec<f64> = record.positions.iter().flatten().copied().collect();
+            let result = PyArray1::from_vec(py, positions)
+                .reshape([frames, n, 3])
+                .and_then(|array| objective.call1(py, (array,)))
+                .and_then(|out| {
+                    let array: PyReadonlyArray1<f64> = out.extract(py)?;
+                    Ok(array.as_slice()?.to_vec())
+                });
+            result
+                .map_err(|err| *raised.lock().expect("one thread") = Some(err))
+                .ok()
+        })
+    };
+    let inner = &mut model.inner;
+    let outcome = guarded(py, || {
+        inner.trajectory_gradient(
+            &loads,
+            dt,
+            &actuation,
+            damping,
+            x0.as_deref(),
+            v0.as_deref(),
+            &newton,
+            checkpoint_every,
+            call,
+        )
+    });
+    if let Some(err) = raised.lock().expect("one thread").take() {
+        return Err(err);
+    }
+    let (record, gradient) = outcome?;
+    let out = PyDict::new(py);
+    let frames = record.positions.len();
+    let positions: Vec<f64> = record.positions.into_iter().flatten().collect();
+    out.set_item(
+        "positions",
+        PyArray1::from_vec(py, positions).reshape([frames, n, 3])?,
+    )?;
+    out.set_item("iterations", record.iterations)?;
+    let names = model.inner.material_param_names();
+    out.set_item(
+        "params",
+        convert::param_vector_to_dict(py, &gradient.params, &names)?,
+    )?;
+    out.set_item("actuation", gradient.actuation)?;
+    out.set_item("mass_damping", gradient.mass_damping)?;
+    out.set_item("stiffness_damping", gradient.stiffness_damping)?;
+    Ok(out)
+}
