@@ -15,6 +15,7 @@ from ..body import set_cable_values
 from ..cables import cable_index
 from ..errors import InputError, SolverError
 from ..materials import Material
+from ..mesh import Mesh
 from ..progress import Progress
 from ..solver import SolveOptions
 from ..static import StaticResult, solve_static
@@ -43,10 +44,12 @@ class Scenario:
 
 def bind(target: Any, body: Any) -> BoundTarget | BoundContactForce:
     """A target bound to ``body``'s mesh (a :class:`~sorofem.Target`, or one already bound); a
-    contact force to the body itself."""
+    contact force to the body itself. ``body`` may be just a mesh for targets on positions."""
     if isinstance(target, (BoundTarget, BoundContactForce)):
         return target
     if isinstance(target, Target):
+        if isinstance(body, Mesh):
+            return target.bind(body)
         return target.bind(body.mesh, body=body)
     raise InputError(f"target: expected a sorofem.Target, got {type(target).__name__}")
 
