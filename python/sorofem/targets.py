@@ -17,6 +17,10 @@ from the observed one) each observed point is compared with its nearest goal ver
 pairing is piecewise constant in ``x``, so ``J`` is the same weights matrix, exact wherever the
 pairing does not switch.
 
+A contact-force target (:meth:`Target.contact_force`) observes instead the total force an
+obstacle exerts on the body; bound to the body, it is a :class:`BoundContactForce` with the same
+methods, its residual in newtons.
+
 The scalar misfit used by :func:`sorofem.estimate` and :func:`sorofem.control` is
 ``1/2 |r|^2`` (m^2); :meth:`BoundTarget.rms` is ``sqrt(|r|^2 / k)``, the root-mean-square
 distance of the observed points from their goals (m).
@@ -43,12 +47,14 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
-from ._validate import describe, positive_scalar
+from ._validate import as_finite, describe, positive_scalar, real
+from .body import Body
 from .errors import InputError, ShapeError
 from .io import Surface, read_surface
 from .mesh import Mesh
+from .obstacles import Obstacle
 
-__all__ = ["Target", "BoundTarget", "Surface", "read_surface", "embed_points"]
+__all__ = ["Target", "BoundTarget", "BoundContactForce", "Surface", "read_surface", "embed_points"]
 
 #: Barycentric coordinates down to this (times the element's size) count as inside.
 INSIDE_TOLERANCE = 1e-9
@@ -257,10 +263,99 @@ class BoundTarget:
         return f"BoundTarget({self.description or self.mode}, points={self.n_points})"
 
 
+class BoundContactForce:
+    """A contact-force target bound to a body: the residual is the total force ``F_k(x)`` that
+    obstacle ``k`` exerts on the body (N) minus its goal: ``F_k - goal`` ``(3,)`` for a goal
+    vector, ``|F_k| - goal`` ``(1,)`` for a goal magnitude.
+
+    ``F_k`` is evaluated by the body's compiled model at the given positions (the obstacles
+    where they are, the barrier stiffness and the friction of its last solve); its Jacobian
+    ``dr/dx`` (``(n_residuals, 3 n_nodes)``, N/m) is the derivative of the barrier forces at the
+    model's last static solution, so :meth:`jacobian` is valid at the positions just solved for
+    (what the inverse functions ask for). It is exact for frictionless contact; friction's
+    lagged normal forces and directions count as constants.
+    """
+
+    mode = "contact_force"
+
+    def __init__(self, model: Any, obstacle: int, goal: NDArray[np.float64], n_nodes: int, description: str) -> None:
+        self.model = model
+        self.obstacle = obstacle
+        self.goal = goal
+        self.n_nodes = n_nodes
+        self.description = description
+
+    @property
+    def n_points(self) -> int:
+        """One observed quantity, the force."""
+        return 1
+
+    @property
+    def n_residuals(self) -> int:
+        """3 for a goal vector, 1 for a goal magnitude."""
+        return int(self.goal.size)
+
+    def force(self, positions: ArrayLike) -> NDArray[np.float64]:
+        """The obstacle's total force on the body at ``positions`` ``(n_nodes, 3)``, ``(3,)`` N."""
+        x = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+        if x.shape[0] != self.n_nodes:
+            raise ShapeError(f"positions: expected shape ({self.n_nodes}, 3), got {x.size} values")
+        return np.asarray(self.model.contact_forces(x)["obstacle_forces"][self.obstacle], dtype=np.float64)
+
+    def points(self, positions: ArrayLike) -> NDArray[np.float64]:
+        """The force as one row ``(1, 3)``, N (what plots and reports show as the observed value)."""
+        return self.force(positions).reshape(1, 3)
+
+    def matched_goal(self, positions: ArrayLike) -> NDArray[np.float64]:
+        """The goal as a force ``(1, 3)``, N (a goal magnitude along the current force)."""
+        if self.goal.size == 3:
+            return self.goal.reshape(1, 3)
+        f = self.force(positions)
+        norm = float(np.linalg.norm(f))
+        return (self.goal[0] * f / norm if norm > 0 else np.zeros(3)).reshape(1, 3)
+
+    def residual(self, positions: ArrayLike) -> NDArray[np.float64]:
+        """``F_k - goal`` ``(3,)`` or ``|F_k| - goal`` ``(1,)``, N."""
+        f = self.force(positions)
+        if self.goal.size == 3:
+            return f - self.goal
+        return np.array([np.linalg.norm(f) - self.goal[0]])
+
+    def jacobian(self, positions: ArrayLike | None = None) -> sp.csr_matrix:
+        """``dr/dx`` ``(n_residuals, 3 n_nodes)``, N/m, at the model's last static solution
+        (a magnitude's along the force there; zero without contact)."""
+        if self.goal.size == 3:
+            weights = list(np.eye(3))
+        else:
+            f = self.force(positions) if positions is not None else np.zeros(3)
+            norm = float(np.linalg.norm(f))
+            weights = [f / norm if norm > 0 else np.zeros(3)]
+        rows = [np.asarray(self.model.contact_force_gradient(self.obstacle, w), dtype=np.float64).reshape(-1)
+                for w in weights]
+        return sp.csr_matrix(np.vstack(rows))
+
+    def rms(self, positions: ArrayLike) -> float:
+        """``|r|``, N: how far the force is from its goal."""
+        r = self.residual(positions)
+        return float(np.sqrt(r @ r))
+
+    max_distance = rms
+
+    def misfit(self, positions: ArrayLike) -> tuple[float, NDArray[np.float64]]:
+        """``(1/2 |r|^2, d/dx)`` (N^2, N^2/m) with the gradient shaped ``(n_nodes, 3)``, at the
+        model's last static solution."""
+        r = self.residual(positions)
+        return 0.5 * float(r @ r), (self.jacobian(positions).T @ r).reshape(-1, 3)
+
+    def __repr__(self) -> str:
+        return f"BoundContactForce({self.description})"
+
+
 class Target:
-    """Where observed parts of a body should be. Build with :meth:`nodes`, :meth:`points` or
-    :meth:`surface`; :meth:`bind` it to a mesh for residuals and Jacobians (the inverse
-    functions do this themselves).
+    """Where observed parts of a body should be, or what force an obstacle should exert on it.
+    Build with :meth:`nodes`, :meth:`points`, :meth:`surface` or :meth:`contact_force`;
+    :meth:`bind` it to a mesh (a body, for a contact force) for residuals and Jacobians (the
+    inverse functions do this themselves).
 
     Examples
     --------
@@ -337,19 +432,56 @@ class Target:
         rest_surface = None if rest is None else _as_surface(rest, scale if rest_scale is None else rest_scale, "rest")
         return cls("surface", goal=goal_surface, rest=rest_surface, match=match, outside=outside)
 
+    @classmethod
+    def contact_force(cls, obstacle: Obstacle | int, force: float | ArrayLike) -> "Target":
+        """The total force an obstacle exerts on the body, N: a vector ``(3,)``, or a magnitude
+        (a number >= 0: ``|F|``, whatever its direction).
+
+        In :func:`sorofem.control` the cables then press the body on the obstacle with that
+        force; the residual is in newtons (and ``tolerance`` with it). Its sensitivities are
+        exact for frictionless contact.
+
+        Parameters
+        ----------
+        obstacle
+            An obstacle of the body (the :class:`~sorofem.Obstacle` given to
+            :meth:`sorofem.Body.add_obstacle`) or its index.
+        force
+            The goal, N.
+
+        Examples
+        --------
+        >>> import sorofem as sf
+        >>> ball = sf.Sphere(center=(0.2, 0.0, 0.1), radius=0.05)
+        >>> sf.Target.contact_force(ball, 0.05)
+        Target.contact_force(Sphere(center=[0.2, 0.0, 0.1], radius=0.05), |F| = 0.05 N)
+        """
+        if not isinstance(obstacle, Obstacle) and (isinstance(obstacle, bool) or not isinstance(obstacle, (int, np.integer))):
+            raise InputError(f"obstacle: expected an obstacle of the body or its index, got {describe(obstacle)}")
+        if np.ndim(force) == 0:
+            goal = np.array([real(force, "force", minimum=0.0, strict=False)])
+        else:
+            goal = as_finite(force, "force", (3,))
+        return cls("contact_force", obstacle=obstacle, force=goal)
+
     # -- binding --------------------------------------------------------------------------
 
-    def bind(self, mesh: Mesh) -> BoundTarget:
-        """The target's residual and Jacobian on ``mesh`` (a :class:`sorofem.Mesh`).
+    def bind(self, mesh: Mesh, body: Body | None = None) -> BoundTarget | BoundContactForce:
+        """The target's residual and Jacobian on ``mesh`` (a :class:`sorofem.Mesh`); a contact
+        force is bound to ``body`` (a :class:`sorofem.Body` with the obstacle), whose compiled
+        model evaluates it.
 
         Raises
         ------
         InputError
-            Node ids out of range, points outside the mesh, or ``match="vertices"`` with
-            surfaces of different topology.
+            Node ids out of range, points outside the mesh, ``match="vertices"`` with
+            surfaces of different topology, a contact force without a body or with an obstacle
+            the body does not have.
         """
         n = mesh.n_nodes
         d = self._data
+        if self.kind == "contact_force":
+            return self._bind_contact_force(body)
         if self.kind == "nodes":
             ids = d["node_ids"]
             if ids.size and (ids.min() < 0 or ids.max() >= n):
@@ -380,7 +512,29 @@ class Target:
             return BoundTarget(w, goal.vertices, rest.vertices, "pointwise", f"surface, {len(goal.vertices)} vertices matched")
         return BoundTarget(w, goal.vertices, rest.vertices, "closest", f"surface, {len(rest.vertices)} vertices to closest goal vertex")
 
+    def _bind_contact_force(self, body: Body | None) -> BoundContactForce:
+        if not isinstance(body, Body):
+            raise InputError(f"body: a contact-force target is bound to the body with the obstacle, got {describe(body)}")
+        obstacle = self._data["obstacle"]
+        placements = body.obstacles
+        if isinstance(obstacle, Obstacle):
+            found = [k for k, p in enumerate(placements) if p.obstacle is obstacle]
+            if not found:
+                raise InputError(f"obstacle: {obstacle!r} is not an obstacle of the body (add it with body.add_obstacle)")
+            index = found[0]
+        else:
+            index = int(obstacle)
+            if not 0 <= index < len(placements):
+                raise InputError(f"obstacle: expected an index in [0, {len(placements)}) (the body's obstacles), got {index}")
+        goal = self._data["force"]
+        what = f"|F| = {goal[0]:g} N" if goal.size == 1 else f"F = {goal.tolist()} N"
+        return BoundContactForce(body.core_model(), index, goal, body.mesh.n_nodes, f"obstacle {index}, {what}")
+
     def __repr__(self) -> str:
+        if self.kind == "contact_force":
+            goal = self._data["force"]
+            what = f"|F| = {goal[0]:g} N" if goal.size == 1 else f"F = {goal.tolist()} N"
+            return f"Target.contact_force({self._data['obstacle']!r}, {what})"
         return f"Target.{self.kind}(...)"
 
 

@@ -79,7 +79,8 @@ def control(
         Initial commands (default: the middle of the bounds, geometric for alphas; a cable
         at rest length is slack and has no gradient).
     tolerance
-        Distance (RMS over the target's points, m) counted as reached; default 1 mm.
+        Distance (RMS over the target's points, m) counted as reached; default 1 mm. For a
+        :meth:`~sorofem.Target.contact_force` target: the force error ``|r|`` in N.
     gravity, solve_tolerance, max_iterations, load_steps
         Options of the static solves.
     options
@@ -164,17 +165,19 @@ def control(
     bound = scs[0].target
     distance = bound.rms(result.positions)
     reachable = distance <= tolerance
+    units = "N" if bound.mode == "contact_force" else "m"
+    what = "force error" if units == "N" else "RMS distance"
     active = [
         f"cable {c}: {_WORD[kind]} at its {'lower' if abs(s[i] - lo[i]) < 1e-9 else 'upper'} bound {theta[i]:.4g}"
         for c, kind, i in zip(ids, kinds, order)
         if abs(s[i] - lo[i]) < 1e-9 or abs(s[i] - hi[i]) < 1e-9
     ]
     if reachable:
-        message = f"reached: RMS distance {distance:.3g} m <= tolerance {tolerance:g} m"
+        message = f"reached: {what} {distance:.3g} {units} <= tolerance {tolerance:g} {units}"
     else:
         message = (
-            f"not reachable: the closest configuration found is {distance:.3g} m (RMS) from the target, "
-            f"above the tolerance {tolerance:g} m" + (f"; {'; '.join(active)}" if active else "")
+            f"not reachable: the closest configuration found is {distance:.3g} {units} ({what}) from the target, "
+            f"above the tolerance {tolerance:g} {units}" + (f"; {'; '.join(active)}" if active else "")
         )
     return ControlResult(
         actuation=theta[order],

@@ -13,7 +13,7 @@ from .._validate import describe
 from ..errors import InputError
 from ..solver import SolveOptions
 from ..static import solve_static
-from ..targets import BoundTarget, Target
+from ..targets import BoundContactForce, BoundTarget, Target
 from ._parameters import Parameters, core_sensitivities
 from ._problem import DEFAULT_TOLERANCE, bind
 from .results import GradientResult
@@ -90,8 +90,8 @@ def gradient(
     if options is None:
         options = SolveOptions(tolerance, max_iterations, load_steps)
     result = solve_static(body, gravity, initial=initial, options=options)
-    if isinstance(objective, (Target, BoundTarget)):
-        value, dx = bind(objective, body.mesh).misfit(result.positions)
+    if isinstance(objective, (Target, BoundTarget, BoundContactForce)):
+        value, dx = bind(objective, body).misfit(result.positions)
     elif callable(objective):
         value, dx = _call_objective(objective, result.positions)
     else:

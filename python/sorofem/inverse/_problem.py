@@ -15,10 +15,11 @@ from ..body import set_cable_values
 from ..cables import cable_index
 from ..errors import InputError, SolverError
 from ..materials import Material
+from ..mesh import Mesh
 from ..progress import Progress
 from ..solver import SolveOptions
 from ..static import StaticResult, solve_static
-from ..targets import BoundTarget, Target
+from ..targets import BoundContactForce, BoundTarget, Target
 from ._parameters import COMMAND_PARAMETERS, Parameters, State
 
 __all__ = ["Scenario", "scenarios", "bind", "Problem", "fitted_material", "final_results", "DEFAULT_TOLERANCE"]
@@ -32,7 +33,7 @@ DEFAULT_TOLERANCE = 1e-10
 
 @dataclass
 class Scenario:
-    target: BoundTarget
+    target: BoundTarget | BoundContactForce
     gravity: NDArray[np.float64]
     actuation: NDArray[np.float64] | None
     solve: SolveOptions
@@ -41,12 +42,15 @@ class Scenario:
     given_initial: NDArray[np.float64] | None = None  # the user's, where every start begins
 
 
-def bind(target: Any, mesh: Any) -> BoundTarget:
-    """A target bound to ``mesh`` (a :class:`~sorofem.Target`, or one already bound)."""
-    if isinstance(target, BoundTarget):
+def bind(target: Any, body: Any) -> BoundTarget | BoundContactForce:
+    """A target bound to ``body``'s mesh (a :class:`~sorofem.Target`, or one already bound); a
+    contact force to the body itself. ``body`` may be just a mesh for targets on positions."""
+    if isinstance(target, (BoundTarget, BoundContactForce)):
         return target
     if isinstance(target, Target):
-        return target.bind(mesh)
+        if isinstance(body, Mesh):
+            return target.bind(body)
+        return target.bind(body.mesh, body=body)
     raise InputError(f"target: expected a sorofem.Target, got {type(target).__name__}")
 
 
@@ -76,7 +80,7 @@ def scenarios(
         initial = spec.get("initial")
         out.append(
             Scenario(
-                bind(t, body.mesh),
+                bind(t, body),
                 np.asarray(spec.get("gravity", gravity), dtype=np.float64).reshape(3),
                 actuation,
                 opts,

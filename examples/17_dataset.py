@@ -37,7 +37,7 @@ dataset and the held-out predictions).
 
 Run::
 
-    python examples/11_dataset.py --out results/dataset [--samples 1000] [--workers 2]
+    python examples/17_dataset.py --out results/dataset [--samples 1000] [--workers 2]
 """
 
 from __future__ import annotations
@@ -65,7 +65,7 @@ NEW_ALPHA = (0.87, 0.91)
 DEGREE = 4
 POWERS = [(i, j) for i in range(DEGREE + 1) for j in range(DEGREE + 1 - i)]
 SCENE = """\
-# A two-cable finger: 10 x 2 x 2 cm, clamped at x = 0 (examples/11_dataset.py).
+# A two-cable finger: 10 x 2 x 2 cm, clamped at x = 0 (examples/17_dataset.py).
 [mesh]
 box = { size = [0.1, 0.02, 0.02], cells = [10, 2, 2] }
 
