@@ -138,3 +138,30 @@ def test_missing_sections_exit_2(tmp_path, capsys):
     scene.write_text(BASE)
     assert main(["estimate", str(scene), "--out", str(tmp_path / "o")]) == 2
     assert "[target]" in capsys.readouterr().err
+
+
+TENDON = """
+[[cable]]
+start = [0.005, 0.01, 0.018]
+direction = [1, 0, 0]
+length = 0.09
+divisions = 4
+model = "tendon"
+pull = 0.001
+"""
+
+
+def test_control_recovers_a_tendon_pull_in_metres(tmp_path, capsys):
+    """Issue 16 item 4: `sorofem control` optimises a tendon's pull in metres, bounds in metres."""
+    text = BASE + TENDON
+    scene = sf.Scene.from_toml(text, tmp_path / "goal.toml")
+    scene.body.pull(0, displacement=0.004)
+    result = sf.solve_static(scene.body, scene.gravity, tolerance=1e-12)
+    nodes = np.flatnonzero(np.isclose(scene.mesh.points[:, 0], 0.1))
+    path = tmp_path / "ctl.toml"
+    path.write_text(text + _target(nodes, result.positions[nodes]) + "\n[control]\ncables = [0]\nbounds = [[0.0, 0.008]]\n")
+    out = tmp_path / "out"
+    assert main(["control", str(path), "--out", str(out), "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert printed["actuation"][0] == pytest.approx(0.004, abs=1e-7)
+    assert printed["reachable"] is True
