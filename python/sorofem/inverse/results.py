@@ -275,7 +275,11 @@ class FitResult:
     starts
         Per start: its initial point, final params, loss and forward solves.
     results
-        One :class:`~sorofem.StaticResult` per scenario at the optimum.
+        One :class:`~sorofem.StaticResult` per scenario at the optimum (empty for a fit to
+        motion).
+    trajectory
+        A fit to motion (``estimate(..., dynamics=...)``): the :class:`~sorofem.Trajectory` at
+        the optimum, else None.
     """
 
     params: dict[str, Any]
@@ -296,6 +300,7 @@ class FitResult:
     profile: Profile | None = None
     #: ``(name, BoundTarget)`` of each scenario, in the order of :attr:`results`.
     targets: list[tuple[str, Any]] = field(default_factory=list)
+    trajectory: Any = None
 
     def markers(self) -> list[tuple[NDArray[np.float64], NDArray[np.float64], str]]:
         """Per scenario: where the fitted model puts the observed points ``(k, 3)``, their goals
@@ -353,7 +358,7 @@ class FitResult:
         try:
             p = model.parameter(kind)
         except KeyError:
-            return name, {"cable_stiffness": "N/m"}.get(kind, "")
+            return name, {"cable_stiffness": "N/m", "mass_damping": "1/s", "stiffness_damping": "s"}.get(kind, "")
         return p.symbol + (f":{region}" if region else ""), p.units
 
     def summary(self) -> str:
