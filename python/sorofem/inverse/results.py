@@ -260,7 +260,7 @@ class FitResult:
         Root-mean-square distance of the observed points from their goals, m.
     forward_solves
         Static solves, all starts and the profile together (warm-started; failed attempts
-        included).
+        included); for a fit to motion, simulated trajectories.
     newton_iterations
         Newton iterations over those solves.
     iterations
