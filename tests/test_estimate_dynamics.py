@@ -1,15 +1,13 @@
 """sf.estimate(..., dynamics=...): Rayleigh damping (and the material) recovered from marker
-tracks of a simulated release-and-swing; the finite-difference Jacobian against the adjoint
-gradient; bad input named."""
+tracks of a simulated release-and-swing; bad input named. The Jacobian's derivatives are
+checked in test_trajectory_sensitivity.py."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from fdcheck import check_gradient, random_direction
 
 import sorofem as sf
-from sorofem.inverse._estimate_dynamics import DynamicParameters, DynamicProblem, _run_options, _tracks
 
 G = (0.0, 0.0, -9.81)
 DT, STEPS = 0.01, 40
@@ -77,28 +75,6 @@ def test_noisy_damping_within_its_uncertainty(recorded):
     assert "mass_damping" in summary and "1/s" in summary and " s\n" in summary
 
 
-def test_jacobian_times_residual_is_the_adjoint_gradient(recorded):
-    """At a point off the optimum, ``J^T r`` from the central-difference Jacobian equals the
-    adjoint gradient of ``1/2 |r|^2``, which is itself checked against central differences of
-    the loss (tests/fdcheck.py)."""
-    body = beam(E=60e3)
-    run = _run_options(START, G, 1e-11, 50, body)
-    params = DynamicParameters(body, ["mass_damping", "stiffness_damping", "density"], None, run["damping"])
-    problem = DynamicProblem(body, params, _tracks(tracks_of(recorded), body, DT, STEPS), run)
-    s = params.to_s(params.current())
-    r, J = problem.evaluate(s, "jacobian")
-    r_adjoint, g = problem.evaluate(s, "gradient")
-    np.testing.assert_allclose(r_adjoint, r, atol=1e-10)
-    np.testing.assert_allclose(J.T @ r, g, rtol=1e-5, atol=1e-7 * np.abs(g).max())
-
-    def loss(x):
-        res, _ = problem.evaluate(x, "residual")
-        return 0.5 * float(res @ res)
-
-    result = check_gradient(loss, s, g, direction=random_direction(s, scaled=False), step=1e-5, rtol=1e-5)
-    assert result.passed, str(result)
-
-
 def test_marker_tracks_leave_out_unseen_markers(recorded):
     seen = recorded.copy()
     seen[0, 1] = np.nan
@@ -122,6 +98,7 @@ def test_marker_tracks_leave_out_unseen_markers(recorded):
     (dict(params=["shear_modulus_field"]), sf.InputError, ["shear_modulus_field", "scalar"]),
     (dict(params=["gravity"]), sf.InputError, ["gravity"]),
     (dict(params=["mass_damping", "mass_damping"]), sf.InputError, ["twice"]),
+    (dict(params=["cable_stiffness"]), sf.InputError, ["cable_stiffness", "cables"]),
     (dict(scenarios=[{}], load_steps=3), sf.InputError, ["scenarios", "load_steps"]),
     (dict(starts=2), sf.InputError, ["starts"]),
     (dict(profile="density"), sf.InputError, ["profile", "density"]),

@@ -309,10 +309,11 @@ def estimate(
         log space, the damping's start is ``x0`` or ``dynamics["damping"]`` (> 0 for a fitted
         one), which also holds the coefficient not fitted. Every trajectory is simulated by
         full Newton to ``tolerance`` per step. ``"least-squares"`` takes its Jacobian, and
-        every method its Gauss-Newton uncertainty, by central differences of re-simulated
-        trajectories (``2 p + 1`` runs for ``p`` parameters); ``"l-bfgs-b"`` follows the exact
-        adjoint gradient (:func:`sorofem.trajectory_gradient`). ``fit.trajectory`` is the run at
-        the optimum, ``fit.forward_solves`` counts simulated runs. ``starts``, ``scenarios``,
+        every method its Gauss-Newton uncertainty, from the forward (tangent-linear)
+        trajectory sensitivity (one extra solve per step and parameter with the step's
+        factorised Hessian); ``"l-bfgs-b"`` follows the adjoint gradient
+        (:func:`sorofem.trajectory_gradient`). ``fit.trajectory`` is the run at the optimum,
+        ``fit.forward_solves`` counts simulated runs. ``starts``, ``scenarios``,
         ``regularization``, ``load_steps``, ``options``, ``client``, ``history_path`` and
         ``resume`` are refused with it.
 

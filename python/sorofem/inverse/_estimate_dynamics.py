@@ -7,13 +7,13 @@ tight tolerance. The residual is every track's ``Target.residual`` at its frame,
 (m); the fit minimises ``1/2 |r|^2`` over the Rayleigh coefficients and, optionally, the
 material, ``density`` and ``cable_stiffness``, each optimised in log space.
 
-Derivatives: ``method="least-squares"`` (Levenberg-Marquardt) takes the Jacobian ``dr/ds`` by
-central differences of re-simulated trajectories (``2 p`` extra runs per Jacobian, ``p``
-parameters; step :data:`JACOBIAN_STEP` in ``s``), which also gives the Gauss-Newton
-uncertainty; ``method="l-bfgs-b"`` takes the exact gradient of ``1/2 |r|^2`` from the discrete
-adjoint (:func:`sorofem.trajectory_gradient`: one forward and one backward sweep) and the same
-finite-difference Jacobian once at the optimum for the uncertainty. An exact forward
-(tangent-linear) trajectory sensitivity would replace the differences; it is not implemented.
+Derivatives: ``method="least-squares"`` (Levenberg-Marquardt) takes the exact Jacobian
+``dr/ds`` from the forward (tangent-linear) trajectory sensitivity of the extension
+(``Model::trajectory_sensitivity``: per step one factorisation of the step's Hessian at its end
+and one solve per parameter), which also gives the Gauss-Newton uncertainty;
+``method="l-bfgs-b"`` follows the adjoint gradient of ``1/2 |r|^2``
+(:func:`sorofem.trajectory_gradient`: one forward and one backward sweep) and takes the
+Jacobian once at the optimum for the uncertainty.
 """
 
 from __future__ import annotations
@@ -28,8 +28,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._validate import MAX_EVALUATIONS, MAX_TIME_STEPS, as_finite, boolean, count, describe, non_negative
 from .._validate import positive_int, positive_scalar
-from ..body import Body
-from ..dynamics import Trajectory, simulate
+from .._extension import core
+from ..body import Body, set_cable_values
+from ..dynamics import Trajectory, evaluate_schedule, simulate
 from ..errors import InputError, ParameterError
 from ..materials import LOG
 from ..progress import Progress
@@ -43,7 +44,7 @@ from ._problem import bind, fitted_material
 from ._trajectory import trajectory_gradient
 from .results import FitResult
 
-__all__ = ["estimate_dynamics", "marker_tracks", "DAMPING_PARAMETERS", "DYNAMICS_KEYS", "JACOBIAN_STEP"]
+__all__ = ["estimate_dynamics", "marker_tracks", "DAMPING_PARAMETERS", "DYNAMICS_KEYS"]
 
 #: The Rayleigh coefficients a fit to motion may estimate: ``mass_damping`` alpha_M (1/s) and
 #: ``stiffness_damping`` beta_K (s), both optimised as their logarithm.
@@ -51,10 +52,6 @@ DAMPING_PARAMETERS = ("mass_damping", "stiffness_damping")
 #: Keys of ``dynamics=``: those of :func:`sorofem.simulate` that define the recorded run.
 DYNAMICS_KEYS = ("dt", "steps", "actuation", "damping", "initial", "initial_velocity", "gravity", "tolerance",
                  "max_iterations")
-#: Central-difference step of the Jacobian in the optimiser's variables (log theta): a relative
-#: change of 1e-4, where the truncation error (~1e-8 relative) and the trajectories' Newton
-#: error divided by the step are both far below the Jacobian's use (steps and standard errors).
-JACOBIAN_STEP = 1e-4
 
 
 def marker_tracks(times: ArrayLike, rest_points: ArrayLike, positions: ArrayLike) -> list[tuple[float, Target]]:
@@ -163,6 +160,10 @@ class DynamicParameters:
         self.static = Parameters(body, static_names, regions) if static_names else None
         self.damping0 = damping
         by_name = {b.name: b for b in self.static.blocks} if self.static is not None else {}
+        for b in by_name.values():
+            if b.size != 1:
+                raise InputError(f"params: {b.name!r} has {b.size} values here (one per spring cable); a fit to "
+                                 "motion takes scalar parameters (a body with one spring cable)")
         empty = np.zeros(0, dtype=np.int64)
         self.blocks = [
             Block(name, name, empty, empty, 1, LOG, i) if name in DAMPING_PARAMETERS
@@ -171,12 +172,12 @@ class DynamicParameters:
             for i, name in enumerate(self.names)
         ]
         self.size = len(self.names)
-        self._static_index = [i for i, n in enumerate(self.names) if n not in DAMPING_PARAMETERS]
+        self.static_index = [i for i, n in enumerate(self.names) if n not in DAMPING_PARAMETERS]
 
     def current(self) -> NDArray[np.float64]:
         theta = np.zeros(self.size)
         if self.static is not None:
-            theta[self._static_index] = self.static.current()
+            theta[self.static_index] = self.static.current()
         for i, name in enumerate(self.names):
             if name in DAMPING_PARAMETERS:
                 theta[i] = self.damping0[DAMPING_PARAMETERS.index(name)]
@@ -263,7 +264,7 @@ class DynamicParameters:
         its compiled model, or the body itself when none of those is fitted)."""
         if self.static is None:
             return body
-        st = self.static.state(theta[self._static_index])
+        st = self.static.state(theta[self.static_index])
         fitted = body.replace(material=fitted_material(body, st))
         for b in self.static.blocks:
             if b.kind == "cable_stiffness":
@@ -273,8 +274,8 @@ class DynamicParameters:
 
 
 class DynamicProblem:
-    """Residuals of the marker tracks as a function of s, with the Jacobian (central
-    differences of re-simulated trajectories) or the adjoint gradient; what the optimisers of
+    """Residuals of the marker tracks as a function of s, with the Jacobian (forward trajectory
+    sensitivity) or the adjoint gradient; what the optimisers of
     :mod:`._optimizers` expect of a problem. ``forward_solves`` counts simulated trajectories."""
 
     def __init__(self, body: Body, params: DynamicParameters, tracks: list[tuple[int, float, BoundTarget]],
@@ -313,18 +314,38 @@ class DynamicProblem:
         self.evaluations += 1
         if want == "gradient":
             return self._gradient(s, theta)
-        r = self.residual_of(self.simulate(theta).positions)
         if want != "jacobian":
-            return r, None
-        columns = []
-        for j in range(p.size):
-            up, down = s.copy(), s.copy()
-            up[j] += JACOBIAN_STEP
-            down[j] -= JACOBIAN_STEP
-            r_up = self.residual_of(self.simulate(p.from_s(up)).positions)
-            r_down = self.residual_of(self.simulate(p.from_s(down)).positions)
-            columns.append((r_up - r_down) / (2 * JACOBIAN_STEP))
-        return r, np.column_stack(columns)
+            return self.residual_of(self.simulate(theta).positions), None
+        positions, dx = self.sensitivities(theta)
+        dts = p.dtheta_ds(s)
+        columns = [np.concatenate([t.jacobian(positions[frame]) @ dx[j, frame].reshape(-1) for frame, _, t in self.tracks])
+                   * dts[j] for j in range(p.size)]
+        return self.residual_of(positions), np.column_stack(columns)
+
+    def sensitivities(self, theta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The run at theta, ``(steps + 1, n, 3)`` positions, and their derivatives by each
+        parameter, ``(p, steps + 1, n, 3)`` (m per unit of the parameter), from the extension's
+        forward sensitivity."""
+        p, run = self.params, self.run
+        body = p.body(self.body, theta)
+        static = iter(p.static.directions(theta[p.static_index]) if p.static is not None else [])
+        directions = [{name: 1.0} if name in DAMPING_PARAMETERS else next(static) for name in p.names]
+        n = body.mesh.n_nodes
+        x0, v0 = _initial_state(run["initial"], run["initial_velocity"])
+        mass_damping, stiffness_damping = p.damping(theta)
+        model = body.core_model()
+        try:
+            out = core().trajectory_sensitivity(
+                model, run["gravity"], body.forces.copy(), body.prescribed_displacement.copy(), run["dt"],
+                evaluate_schedule(body, run["actuation"], run["dt"], run["steps"]), directions, mass_damping,
+                stiffness_damping, x0, v0, run["tolerance"], run["max_iterations"])
+        finally:
+            set_cable_values(model, body.commands, body.cable_stiffnesses)
+        self.forward_solves += 1
+        self.newton_iterations += int(np.sum(out["iterations"]))
+        self._tick()
+        positions = np.asarray(out["positions"], dtype=np.float64).reshape(-1, n, 3)
+        return positions, np.asarray(out["dx"], dtype=np.float64).reshape(len(directions), -1, n, 3)
 
     def _gradient(self, s: NDArray[np.float64], theta: NDArray[np.float64]) -> tuple[NDArray[np.float64], Any]:
         p, run = self.params, self.run
@@ -336,7 +357,7 @@ class DynamicProblem:
         self.forward_solves += 1
         self.newton_iterations += int(out.iterations.sum())
         self._tick()
-        g = np.array([float(out.gradient[name]) for name in p.names])
+        g = np.array([float(np.ravel(out.gradient[name])[0]) for name in p.names])
         return self.residual_of(out.positions), g * p.dtheta_ds(s)
 
     def restore(self) -> None:
@@ -345,6 +366,19 @@ class DynamicProblem:
     def rms(self, r: NDArray[np.float64]) -> float:
         data = r[: self.n_data]
         return float(np.sqrt(data @ data / max(self.n_data // 3, 1)))
+
+
+def _initial_state(initial: Any, velocity: Any) -> tuple[Any, Any]:
+    """Initial positions and velocities (None: rest, at rest) of ``dynamics['initial']`` and
+    ``['initial_velocity']``, as :func:`sorofem.simulate` reads them."""
+    x0, v0 = initial, None
+    if isinstance(initial, Trajectory):
+        x0, v0 = initial.final_positions, initial.velocities
+    elif isinstance(initial, StaticResult):
+        x0 = initial.positions
+    if velocity is not None:
+        v0 = velocity
+    return x0, v0
 
 
 def _run_options(dynamics: Any, gravity: ArrayLike, tolerance: float, max_iterations: int, body: Body) -> dict[str, Any]:
