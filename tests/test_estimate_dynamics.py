@@ -75,6 +75,24 @@ def test_noisy_damping_within_its_uncertainty(recorded):
     assert "mass_damping" in summary and "1/s" in summary and " s\n" in summary
 
 
+def test_bound_holds_a_coefficient_and_profile_brackets_the_truth(recorded):
+    noisy = recorded + np.random.default_rng(7).normal(0.0, NOISE, recorded.shape)
+    tracks = tracks_of(noisy)
+    held = sf.estimate(beam(), tracks, ["mass_damping", "stiffness_damping"], dynamics=START, gravity=G,
+                       bounds={"stiffness_damping": (0.0, 0.003)})
+    assert held.uncertainty.at_bound == {"mass_damping": None, "stiffness_damping": "upper"}
+    assert held.params["stiffness_damping"] == pytest.approx(0.003, rel=1e-9)
+    assert np.isnan(held.uncertainty.std[1]) and np.isfinite(held.uncertainty.std[0])
+    # Held too low, beta_K leaves more of the decay to alpha_M.
+    assert held.params["mass_damping"] > TRUE["mass_damping"]
+    fit = sf.estimate(beam(), tracks, ["mass_damping", "stiffness_damping"], dynamics=START, gravity=G,
+                      profile="stiffness_damping", profile_values=[0.0047, 0.005, 0.0053])
+    lo, hi = fit.profile.interval
+    assert fit.profile.closed == (True, True)
+    assert lo < TRUE["stiffness_damping"] < hi
+    assert np.all(np.isfinite(fit.profile.loss))
+
+
 def test_marker_tracks_leave_out_unseen_markers(recorded):
     seen = recorded.copy()
     seen[0, 1] = np.nan
