@@ -32,7 +32,8 @@ The script exits with status 1 unless every check passes:
   within 20 %: what is left is noise, not model error.
 
 Outputs in ``--out DIR`` (default ``results/damping_from_motion``): ``tracks.png`` (the tip
-marker's height, recorded and fitted, and the start's) and ``summary.json``.
+marker's height, recorded and fitted, and the start's), ``fit.png`` (every recorded marker
+against the fitted model, and the misfit history) and ``summary.json``.
 
 Run::
 
@@ -163,6 +164,7 @@ def run(out_dir: str | Path = "results/damping_from_motion") -> dict[str, Any]:
         },
     }
     plot_tracks(times, noisy, fit, start, body, out / "tracks.png")
+    sf.plot.plot_fit(fit, out / "fit.png")
     summary = {
         "example": "18_damping_from_motion",
         "n_nodes": body.mesh.n_nodes,
@@ -179,7 +181,7 @@ def run(out_dir: str | Path = "results/damping_from_motion") -> dict[str, Any]:
         "summary": fit.summary(),
         "checks": checks,
         "passed": all(c["passed"] for c in checks.values()),
-        "files": ["tracks.png", "summary.json"],
+        "files": ["tracks.png", "fit.png", "summary.json"],
         "timings": {"record": t1 - t0, "noiseless_fit": t2 - t1, "noisy_fit": t3 - t2,
                     "total": time.perf_counter() - t0},
     }

@@ -48,6 +48,9 @@ def test_noiseless_damping_is_recovered(recorded, method, rtol):
         assert fit.params[name] == pytest.approx(value, rel=rtol), (name, fit.params)
     assert fit.residual < 1e-8
     assert fit.trajectory.positions.shape == (STEPS + 1, 81, 3)
+    [(model, goal, _)] = fit.markers()  # what fit.png shows: every track's markers at its frame
+    assert model.shape == goal.shape == (len(FRAMES) * len(MARKERS), 3)
+    np.testing.assert_allclose(model, goal, atol=1e-8)
 
 
 def test_noiseless_damping_and_modulus_are_recovered(recorded):

@@ -499,6 +499,7 @@ def estimate_dynamics(
         profile=fit_profile,
         starts=[{"x0": p.as_dict(theta0), "params": p.as_dict(theta), "loss": 0.5 * float(r @ r),
                  "forward_solves": problem.forward_solves, "iterations": iterations, "converged": converged}],
+        targets=[(t, target) for _, t, target in tracks],
         trajectory=trajectory,
     )
 

@@ -298,14 +298,22 @@ class FitResult:
     starts: list[dict[str, Any]] = field(default_factory=list)
     results: list[Any] = field(default_factory=list)
     profile: Profile | None = None
-    #: ``(name, BoundTarget)`` of each scenario, in the order of :attr:`results`.
-    targets: list[tuple[str, Any]] = field(default_factory=list)
+    #: ``(name, BoundTarget)`` of each scenario, in the order of :attr:`results`; for a fit to
+    #: motion ``(time (s), BoundTarget)`` of each marker track.
+    targets: list[tuple[Any, Any]] = field(default_factory=list)
     trajectory: Any = None
 
     def markers(self) -> list[tuple[NDArray[np.float64], NDArray[np.float64], str]]:
         """Per scenario: where the fitted model puts the observed points ``(k, 3)``, their goals
-        ``(k, 3)`` (m) and the scenario's name (what ``fit.png`` shows)."""
-        return _markers(self.targets, self.results)
+        ``(k, 3)`` (m) and the scenario's name (what ``fit.png`` shows); for a fit to motion one
+        entry, every track's points at its frame stacked."""
+        if self.trajectory is None:
+            return _markers(self.targets, self.results)
+        times, positions = self.trajectory.times, self.trajectory.positions
+        frames = [positions[int(np.argmin(np.abs(times - t)))] for t, _ in self.targets]
+        model = [target.points(x) for (_, target), x in zip(self.targets, frames)]
+        goal = [target.matched_goal(x) for (_, target), x in zip(self.targets, frames)]
+        return [(np.vstack(model), np.vstack(goal), "marker tracks")] if model else []
 
     @property
     def youngs_modulus(self) -> Any:
