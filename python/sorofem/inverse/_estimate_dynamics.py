@@ -26,9 +26,9 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._extension import core
 from .._validate import MAX_EVALUATIONS, MAX_TIME_STEPS, as_finite, boolean, count, describe, non_negative
 from .._validate import positive_int, positive_scalar
-from .._extension import core
 from ..body import Body, set_cable_values
 from ..dynamics import Trajectory, evaluate_schedule, simulate
 from ..errors import InputError, ParameterError
