@@ -176,6 +176,7 @@ def test_an_unreachable_goal_gives_the_closest_schedule():
     ({"reach_time": 0.255}, r"dynamics\['reach_time'\]: expected the time of a frame, a multiple of dt = 0.01 s in \[0.01, 0.4\] s"),
     ({"reach_time": 0.5}, r"dynamics\['reach_time'\]: expected the time of a frame"),
     ({"reach_time": 0.0}, r"dynamics\['reach_time'\]: expected the time of a frame"),
+    ({"reach_time": 1.7e308}, r"dynamics\['reach_time'\]: expected the time of a frame"),
     ({"reach_time": "end"}, r"dynamics\['reach_time'\]: expected a time in s"),
     ({"initial": np.zeros((3, 3))}, r"dynamics\['initial'\]"),
     ({"swing_weight": 2.0}, r"dynamics: unknown keys \['swing_weight'\]"),

@@ -90,7 +90,8 @@ def dynamics_options(dynamics: Any, body: Body) -> ScheduleOptions:
     name = "dynamics['reach_time']"
     if isinstance(reach, bool) or not isinstance(reach, numbers.Real) or not math.isfinite(float(reach)):
         raise ParameterError(f"{name}: expected a time in s, got {describe(reach)}", name)
-    frame = round(float(reach) / dt)
+    ratio = float(reach) / dt
+    frame = round(ratio) if math.isfinite(ratio) else -1
     if not (1 <= frame <= steps and abs(frame * dt - float(reach)) <= 1e-9 * max(1.0, abs(float(reach)))):
         raise ParameterError(f"{name}: expected the time of a frame, a multiple of dt = {dt:g} s in "
                              f"[{dt:g}, {end:g}] s (the run ends at dt * steps), got {float(reach):g} s", name)
