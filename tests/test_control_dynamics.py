@@ -204,3 +204,8 @@ def test_bad_control_arguments_with_dynamics_are_named():
         sf.control(body, target, cables=[0], method="nelder-mead", dynamics=dynamics)
     with pytest.raises(sf.InputError, match=r"initial: a schedule"):
         sf.control(body, target, cables=[0], initial=rest, dynamics=dynamics)
+    with pytest.raises(sf.InputError, match=r"target: expected a sorofem.Target"):
+        sf.control(body, "tip", cables=[0], dynamics=dynamics)
+    body.add_obstacle(sf.Plane(point=(0, 0, -0.5), normal=(0, 0, 1)))
+    with pytest.raises(sf.InputError, match=r"target: a contact force is not a target of a schedule"):
+        sf.control(body, sf.Target.contact_force(0, 0.1), cables=[0], bounds=[(0.5, 1.0)], dynamics=dynamics)

@@ -37,6 +37,7 @@ from ..errors import InputError, ParameterError, SolverError
 from ..progress import Progress
 from ..static import StaticResult
 from ..targets import BoundContactForce, BoundTarget
+from ._problem import bind
 from ._trajectory import trajectory_gradient
 
 __all__ = ["DYNAMICS_KEYS", "ScheduleResult", "ScheduleProblem", "control_schedule", "dynamics_options"]
@@ -225,8 +226,8 @@ class ScheduleResult:
     trajectory
         The :class:`~sorofem.Trajectory` the schedule produces (every frame saved).
     objective
-        ``J``, m^2 (the module docstring of ``sorofem.inverse._control_dynamics`` and
-        docs/tutorials/control.md give its definition).
+        ``J``, m^2: the mean over the frames from T to the end of ``1/2 |r|^2``
+        (docs/tutorials/control.md, "A schedule in time").
     distance, max_distance
         At the reach time T: RMS distance of the target's points from their goals and the
         largest one, m.
@@ -321,10 +322,10 @@ def control_schedule(
     ``(c,)``; the other arguments as there."""
     t0 = time.perf_counter()
     options = dynamics_options(dynamics, body)
-    if isinstance(target, BoundContactForce) or getattr(target, "kind", None) == "contact_force":
+    bound = bind(target, body)
+    if isinstance(bound, BoundContactForce):
         raise InputError("target: a contact force is not a target of a schedule (dynamics= takes point, node "
                          "and surface targets)")
-    bound = target if isinstance(target, BoundTarget) else target.bind(body.mesh)
     k, c = options.keyframe_times.size, len(ids)
     v0 = _start(x0, lo, hi, words, k, c)
     width = hi - lo
