@@ -44,14 +44,14 @@ from ._problem import bind, fitted_material
 from ._trajectory import trajectory_gradient
 from .results import FitResult
 
-__all__ = ["estimate_dynamics", "marker_tracks", "DAMPING_PARAMETERS", "DYNAMICS_KEYS"]
+__all__ = ["estimate_dynamics", "marker_tracks", "DAMPING_PARAMETERS", "ESTIMATE_DYNAMICS_KEYS"]
 
 #: The Rayleigh coefficients a fit to motion may estimate: ``mass_damping`` alpha_M (1/s) and
 #: ``stiffness_damping`` beta_K (s), both optimised as their logarithm.
 DAMPING_PARAMETERS = ("mass_damping", "stiffness_damping")
 #: Keys of ``dynamics=``: those of :func:`sorofem.simulate` that define the recorded run.
-DYNAMICS_KEYS = ("dt", "steps", "actuation", "damping", "initial", "initial_velocity", "gravity", "tolerance",
-                 "max_iterations")
+ESTIMATE_DYNAMICS_KEYS = ("dt", "steps", "actuation", "damping", "initial", "initial_velocity", "gravity",
+                          "tolerance", "max_iterations")
 
 
 def marker_tracks(times: ArrayLike, rest_points: ArrayLike, positions: ArrayLike) -> list[tuple[float, Target]]:
@@ -385,11 +385,11 @@ def _run_options(dynamics: Any, gravity: ArrayLike, tolerance: float, max_iterat
     """The recorded run's arguments from ``dynamics=`` (checked as :func:`sorofem.simulate`
     checks them), ``gravity``, ``tolerance`` and ``max_iterations`` filling what it leaves out."""
     if not isinstance(dynamics, Mapping):
-        raise InputError(f"dynamics: expected a dict with dt, steps and optionally {list(DYNAMICS_KEYS[2:])}, "
+        raise InputError(f"dynamics: expected a dict with dt, steps and optionally {list(ESTIMATE_DYNAMICS_KEYS[2:])}, "
                          f"got {describe(dynamics)}")
-    unknown = sorted(set(dynamics) - set(DYNAMICS_KEYS))
+    unknown = sorted(set(dynamics) - set(ESTIMATE_DYNAMICS_KEYS))
     if unknown:
-        raise InputError(f"dynamics: unknown keys {unknown}; expected {list(DYNAMICS_KEYS)}")
+        raise InputError(f"dynamics: unknown keys {unknown}; expected {list(ESTIMATE_DYNAMICS_KEYS)}")
     for key in ("dt", "steps"):
         if key not in dynamics:
             raise InputError(f"dynamics: needs {key!r} (the recorded run's time step and number of steps)")
