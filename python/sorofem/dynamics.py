@@ -661,6 +661,8 @@ def _run_in_chunks(
         joined.factorizations.append(np.asarray(out["factorizations"], dtype=np.int64))
         joined.residuals.append(np.asarray(out["residuals"], dtype=np.float64))
         joined.cutbacks += int(out.get("cutbacks", 0))
+        for phase, seconds in out.get("timings", {}).items():
+            joined.timings[phase] = joined.timings.get(phase, 0.0) + float(seconds)
         joined.velocities = out["velocities"]
         joined.done = end
         x, v = positions[-1], np.asarray(out["velocities"], dtype=np.float64)
