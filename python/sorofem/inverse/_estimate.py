@@ -254,8 +254,9 @@ def estimate(
         workers side by side, each an independent fit as without a client (the same path
         and optimum of every start; the body travels without its compiled model, which
         each worker builds, but with its barrier stiffness, fixed here first by a solve at
-        the first start if no solve fixed it yet); the final evaluation runs here. ``verbose`` lines are not
-        printed for remote starts; the history file is written here as starts finish.
+        the first start if no solve fixed it yet); the final evaluation runs here.
+        ``verbose`` lines are not printed for remote starts; the history file is written
+        here as starts finish.
     max_evaluations
         Budget of objective evaluations per start (each is one solve per scenario), from 1 to
         100,000 (a documented limit).
