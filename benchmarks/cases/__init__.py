@@ -8,6 +8,7 @@ from . import materials  # noqa: F401  (Yeoh against Neo-Hookean, side by side)
 from . import cables  # noqa: F401
 from . import tendons  # noqa: F401  (tendons against spring chains, side by side)
 from . import dynamics  # noqa: F401
+from . import realtime  # noqa: F401  (the fast step mode against the clock)
 from . import adjoint  # noqa: F401
 from . import trajectory  # noqa: F401  (the adjoint through time)
 from . import contact  # noqa: F401  (the cantilever on a floor, with and without it)
