@@ -415,3 +415,13 @@ def test_step_methods_agree_to_the_tolerance_and_modified_newton_factorises_less
     assert newton.residuals.max() < 1e-10 and modified.residuals.max() < 1e-10
     assert linear.factorizations.max() <= 1 and list(linear.iterations) == [1] * 60
     assert np.abs(linear.positions - newton.positions).max() < 0.05 * swing
+
+
+def test_simulate_cables_of_different_point_counts(beam):
+    """Regression: the finiteness check of a trajectory stacked each frame's cable points into
+    one array, which failed (ValueError) for a spring chain and a tendon of different lengths."""
+    beam.add_cable(sf.Cable.line((0, 0.05, 0.09), (1, 0, 0), 0.4, 10, stiffness=1e5))
+    beam.add_cable(sf.Cable.line((0, 0.01, 0.05), (1, 0, 0), 0.38, 8, model="tendon", pull=0.0))
+    traj = sf.simulate(beam, 0.01, 3, actuation={1: Keyframes([[0.0, 0.0], [0.03, 0.004]])}, gravity=GRAVITY)
+    assert [p.shape for p in traj.cable_points[-1]] == [(11, 3), (9, 3)]
+    assert traj.cable_pull[-1][1] == pytest.approx(0.004, rel=1e-6)

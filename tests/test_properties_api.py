@@ -112,6 +112,12 @@ CALLS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
                 sf.control(body(cables=True), TARGET, cables, bounds, x0, tolerance=tolerance,
                            max_evaluations=max_evaluations, gravity=G),
                 {"cables": [0], "bounds": [(0.5, 1.0)], "x0": None, "tolerance": 1e-3, "max_evaluations": 10}),
+    "control(dynamics=)": (lambda dt, steps, keyframe_times, reach_time, damping, x0:
+                           sf.control(body(cables=True), TARGET, [0], [(0.5, 1.0)], x0, gravity=G, max_evaluations=3,
+                                      dynamics={"dt": dt, "steps": steps, "keyframe_times": keyframe_times,
+                                                "reach_time": reach_time, "damping": damping}),
+                           {"dt": 0.01, "steps": 3, "keyframe_times": [0.01, 0.02], "reach_time": 0.02,
+                            "damping": (1.0, 0.0), "x0": None}),
     "gradient": (lambda params, gravity: sf.gradient(body(), TARGET, params, gravity), {"params": ["shear_modulus"],
                                                                                          "gravity": G}),
     "Target.nodes": (lambda nodes, positions: sf.Target.nodes(nodes, positions).bind(body().mesh),

@@ -124,8 +124,15 @@ def check_finite_solution(
             continue
         arrays = value if isinstance(value, (list, tuple)) else [value]
         for arr in arrays:
-            if not np.all(np.isfinite(np.asarray(arr, dtype=np.float64))):
+            if not _all_finite(arr):
                 raise SolverError(f"{what} produced non-finite {key.replace('_', ' ')}; no result is returned")
+
+
+def _all_finite(value: Any) -> bool:
+    try:
+        return bool(np.all(np.isfinite(np.asarray(value, dtype=np.float64))))
+    except ValueError:  # ragged: a trajectory's frames hold one array per cable, of each cable's length
+        return all(_all_finite(v) for v in value)
 
 
 class ContactState:

@@ -12,7 +12,8 @@ solves, forward and adjoint sensitivities from the extension):
   (adjoint gradient of ``1/2 |r|^2``) or Nelder-Mead (no derivatives); several scenarios
   jointly, several starts, Gauss-Newton uncertainty.
 * :func:`control`: cable commands (spring alphas, tendon pulls or tensions) that bring a
-  target as close as possible.
+  target as close as possible; with ``dynamics=``, an open-loop schedule of them (keyframes)
+  that brings it there at a time T and keeps it there (:class:`ScheduleResult`).
 
 Parameters (``params=``), each a scalar unless noted:
 
@@ -55,6 +56,7 @@ from __future__ import annotations
 
 from ._analysis import PROFILE_CONDITION
 from ._control import control
+from ._control_dynamics import DYNAMICS_KEYS, ScheduleResult
 from ._estimate import TornHistoryWarning, estimate
 from ._gradient import gradient
 from ._parameters import PARAMETERS, parameter_names
@@ -76,12 +78,14 @@ __all__ = [
     "GradientResult",
     "FitResult",
     "ControlResult",
+    "ScheduleResult",
+    "DYNAMICS_KEYS",
     "Uncertainty",
     "Profile",
     "TornHistoryWarning",
 ]
 
 # Documented (and pickled) as members of this package, whichever private module holds them.
-for _public in (gradient, trajectory_gradient, TrajectoryGradientResult, estimate, control, parameter_names, GradientResult, FitResult, ControlResult, Uncertainty,
+for _public in (gradient, trajectory_gradient, TrajectoryGradientResult, estimate, control, parameter_names, GradientResult, FitResult, ControlResult, ScheduleResult, Uncertainty,
                 Profile, TornHistoryWarning):
     _public.__module__ = __name__

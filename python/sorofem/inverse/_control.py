@@ -14,6 +14,7 @@ from ..cables import cable_index
 from ..errors import InputError
 from ..progress import Progress
 from ..solver import SolveOptions
+from ._control_dynamics import ScheduleResult, control_schedule
 from ._optimizers import Recorder, scipy_minimize
 from ._parameters import Parameters
 from ._problem import DEFAULT_TOLERANCE, Problem, final_results
@@ -54,8 +55,10 @@ def control(
     verbose: bool = False,
     progress: bool | None = None,
     options: SolveOptions | None = None,
-) -> ControlResult:
-    """Cable commands that bring a target as close as possible.
+    dynamics: dict[str, Any] | None = None,
+) -> ControlResult | ScheduleResult:
+    """Cable commands that bring a target as close as possible; with ``dynamics``, a cable
+    schedule that brings it there at a time T and keeps it there.
 
     Minimises ``1/2 |r|^2`` over the commands of the chosen cables, within ``bounds``: the
     actuation alpha of a spring cable (in log alpha), the pull of a tendon driven by its pull
@@ -97,16 +100,38 @@ def control(
         A progress line on stderr, ticked after every forward solve, with the iteration and
         the loss: ``None`` (default) only when stderr is a terminal and the search lasts more
         than half a second, ``True`` always, ``False`` never (see :mod:`sorofem.progress`).
+    dynamics
+        Optimise an open-loop schedule instead (docs/tutorials/control.md, "A schedule in
+        time"): the commands of the chosen cables at ``keyframe_times`` (s; piecewise linear
+        between them, from the current command at t = 0, held after the last) that minimise
+        the mean of ``1/2 |r|^2`` over the frames from ``reach_time`` (T, s, a frame's time)
+        to the end of the run (m^2). Keys ``dt``, ``steps``, ``keyframe_times``,
+        ``reach_time`` (required), ``damping``, ``initial``, ``initial_velocity`` (as for
+        :func:`sorofem.simulate`) and ``checkpoint_every`` (as for
+        :func:`~sorofem.inverse.trajectory_gradient`). Every time step is solved to
+        ``solve_tolerance`` in at most ``max_iterations`` (``load_steps`` does not apply);
+        ``x0`` is one command per cable or ``(k, c)`` keyframe values; ``tolerance`` bounds
+        the RMS distance at T and at every frame after it; ``max_evaluations`` counts
+        simulations (each with its adjoint); L-BFGS-B only.
 
     Returns
     -------
     ControlResult
+        Or, with ``dynamics``, a :class:`~sorofem.inverse.ScheduleResult` (the schedule, its
+        trajectory, the distance at T and the swing after it).
 
     Examples
     --------
     >>> ctl = sf.control(body, sf.Target.points(rest, goal), cables=[cable], bounds=[(0.3, 1.0)],
     ...                  gravity=(0, 0, -9.81))  # doctest: +SKIP
     >>> ctl.actuation, ctl.reachable, ctl.distance  # doctest: +SKIP
+
+    Reach the goal at T = 0.5 s and hold it until 1.5 s, with keyframes every 0.1 s:
+
+    >>> plan = sf.control(body, target, cables=[cable], bounds=[(0.3, 1.0)], gravity=(0, 0, -9.81),
+    ...                   dynamics=dict(dt=0.01, steps=150, keyframe_times=[0.1, 0.2, 0.3, 0.4, 0.5],
+    ...                                 reach_time=0.5, damping=(1.0, 0.0), initial=rest))  # doctest: +SKIP
+    >>> plan.schedule, plan.distance, plan.swing  # doctest: +SKIP
     """
     if not isinstance(method, str) or method not in ("l-bfgs-b", "nelder-mead"):
         raise InputError(f"method: expected 'l-bfgs-b' or 'nelder-mead', got {describe(method)}")
@@ -117,7 +142,7 @@ def control(
     if cables is not None and (isinstance(cables, (str, bytes)) or not isinstance(cables, Sequence)):
         raise InputError(f"cables: expected a list of cables (sorofem.Cable or indices), got {describe(cables)}")
     t0 = time.perf_counter()
-    ids = list(range(len(body.cables))) if cables is None else [cable_index(body, c) for c in cables]
+    ids = list(range(len(body.cables))) if cables is None else [_cable_id(body, c, i) for i, c in enumerate(cables)]
     if not ids:
         raise InputError("cables: expected at least one cable to control")
     if len(set(ids)) != len(ids):
@@ -134,6 +159,17 @@ def control(
     lo_u, hi_u = _bound_pairs(bounds, n)
     for i, (c, kind) in enumerate(zip(ids, kinds)):
         _check_bounds(body, c, kind, lo_u[i], hi_u[i])
+    if dynamics is not None:
+        if method != "l-bfgs-b" or initial is not None:
+            bad = "method" if method != "l-bfgs-b" else "initial"
+            raise InputError(f"{bad}: a schedule (dynamics=) is optimised by 'l-bfgs-b' from the state "
+                             f"dynamics['initial']; got {bad}={describe(method if bad == 'method' else initial)}")
+        solve_dyn = SolveOptions(solve_tolerance, max_iterations, load_steps) if options is None else options
+        return control_schedule(
+            body, target, ids, [_WORD[k] for k in kinds], lo_u, hi_u, x0, dynamics, tolerance=tolerance,
+            gravity=gravity, solve_tolerance=solve_dyn.tolerance, max_iterations=solve_dyn.max_iterations,
+            max_evaluations=max_evaluations, xtol=xtol, ftol=ftol, verbose=verbose, progress=progress,
+        )
     if x0 is None:
         theta0_u = np.where(np.array(kinds) == "cable_actuation", np.sqrt(np.abs(lo_u * hi_u)), 0.5 * (lo_u + hi_u))
     else:
@@ -200,6 +236,14 @@ def control(
 #: The parameter of each cable command, and how messages call it.
 _COMMAND_PARAMETER = {"actuation": "cable_actuation", "pull": "cable_pull", "tension": "cable_tension"}
 _WORD = {"cable_actuation": "alpha", "cable_pull": "pull (m)", "cable_tension": "tension (N)"}
+
+
+def _cable_id(body: Any, cable: Any, i: int) -> int:
+    """``cables[i]``'s index in ``body.cables``; a cable the body does not have is named as ``cables[i]``."""
+    try:
+        return cable_index(body, cable)
+    except InputError as exc:
+        raise InputError(f"cables[{i}]: {str(exc).removeprefix('cable: ')}") from None
 
 
 def _default_bounds(body: Any, c: int, kind: str) -> tuple[float, float]:
