@@ -145,6 +145,20 @@ def targets(rows: dict[str, Row], array_dir: Path) -> str:
             timings = (good or {}).get("timings") or {}
             add("contact pass / Newton time", name, ratio(timings.get("contact"), timings.get("total")), 0.25)
 
+    for name, r in rows.items():
+        if in_table(name, "contact-finger"):
+            good = ok_row(name)
+            add("time per Newton iteration with a ball / without (a contact solve at the same iteration count)",
+                name, good and ratio(good["seconds_per_iteration"], good["seconds_per_iteration_without"]), 2.0, "x")
+            if r.get("tets", 0) >= 10_000:
+                timings = (good or {}).get("timings") or {}
+                add("contact pass / Newton time, ~10k-tet finger", name,
+                    ratio(timings.get("contact"), timings.get("total")), 0.25)
+        if in_table(name, "self-contact"):
+            timings = (ok_row(name) or {}).get("timings") or {}
+            add("contact pass / Newton time, self-contact (the contact pass bound)", name,
+                ratio(timings.get("contact"), timings.get("total")), 0.25)
+
     # Sweeps (issue 21).
     name = "sorofem/sweep-cantilever-0.4m-8x2x2-200"
     if name in rows:

@@ -165,3 +165,106 @@ def test_control_recovers_a_tendon_pull_in_metres(tmp_path, capsys):
     printed = json.loads(capsys.readouterr().out)
     assert printed["actuation"][0] == pytest.approx(0.004, abs=1e-7)
     assert printed["reachable"] is True
+
+
+# ---------------------------------------------------------------------------
+# [target] contact_force (issue 17)
+
+FINGER = """\
+[mesh]
+box = { size = [0.1, 0.02, 0.02], cells = [10, 2, 2] }
+
+[material]
+youngs_modulus = 100e3
+poisson_ratio = 0.3
+
+[[fixed]]
+box = { min = [-1e-9, -1, -1], max = [1e-9, 1, 1] }
+
+[[cable]]
+start = [0.0, 0.01, 0.003]
+direction = [1, 0, 0]
+length = 0.095
+divisions = 9
+model = "tendon"
+pull = 0.003
+
+[[obstacle]]
+name = "wall"
+plane = { point = [0.2, 0, 0], normal = [-1, 0, 0] }
+
+[[obstacle]]
+name = "table"
+plane = { point = [0, 0, -0.004], normal = [0, 0, 1] }
+
+[contact]
+stiffness = 1e9
+"""
+
+
+def _table_force(text: str, tmp_path, pull: float | None = None) -> float:
+    """|F| of the table on the finger of scene ``text`` (its tendon pulled to ``pull`` if given)."""
+    scene = sf.Scene.from_toml(text, tmp_path / "check.toml")
+    if pull is not None:
+        scene.body.pull(0, displacement=pull)
+    return float(np.linalg.norm(sf.solve_static(scene.body, scene.gravity, tolerance=1e-12).obstacle_forces[1]))
+
+
+@pytest.mark.parametrize("obstacle", ['"table"', "1"])
+def test_control_presses_the_table_with_a_target_force(tmp_path, capsys, obstacle):
+    """The tendon pull that makes the table (named, or by index) push back with 0.05 N: checked
+    by a plain solve at the pull found."""
+    assert _table_force(FINGER, tmp_path) > 0.055, "the commanded pull should press harder than the goal"
+    path = tmp_path / "ctl.toml"
+    path.write_text(FINGER + f"\n[target]\ncontact_force = {{ obstacle = {obstacle}, force = 0.05 }}\n"
+                    "\n[control]\ncables = [0]\nbounds = [[0.002, 0.006]]\n")
+    out = tmp_path / "out"
+    assert main(["control", str(path), "--out", str(out), "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert printed["reachable"] is True
+    assert _table_force(FINGER, tmp_path, printed["actuation"][0]) == pytest.approx(0.05, rel=1e-6)
+    assert (out / "fit.png").is_file() and (out / "result.vtu").is_file()
+
+
+def test_estimate_fits_the_modulus_to_a_force_vector(tmp_path, capsys):
+    """E from the force vector the table exerts, the finger's tendon held at its pull; both scenes
+    share the barrier stiffness ([contact] stiffness), so the fit is exact."""
+    scene = sf.Scene.from_toml(FINGER, tmp_path / "truth.toml")
+    force = sf.solve_static(scene.body, tolerance=1e-12).obstacle_forces[1]
+    path = tmp_path / "fit.toml"
+    path.write_text(FINGER.replace("youngs_modulus = 100e3", "youngs_modulus = 60e3")
+                    + f"\n[target]\ncontact_force = {{ obstacle = \"table\", force = {force.tolist()} }}\n"
+                    "\n[estimate]\nparams = [\"youngs_modulus\"]\nx0 = [60e3]\n")
+    out = tmp_path / "out"
+    assert main(["estimate", str(path), "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["youngs_modulus"] == pytest.approx(100e3, rel=1e-6)
+
+
+BAD_CONTACT_TARGETS = [
+    ('contact_force = { obstacle = "cup", force = 0.1 }', "target.contact_force.obstacle", "'cup'"),
+    ("contact_force = { obstacle = 2, force = 0.1 }", "target.contact_force.obstacle", "2"),
+    ('contact_force = { obstacle = "table", force = [0.1, 0.2] }', "target.contact_force.force", "[0.1, 0.2]"),
+    ('contact_force = { obstacle = "table", force = -0.1 }', "target.contact_force.force", "-0.1"),
+    ('contact_force = { obstacle = "table" }', "target.contact_force.force", "missing"),
+    ('contact_force = { obstacle = "table", force = 0.1 }\nnodes = [1]\npositions = [[0, 0, 0]]', "target",
+     "contact_force"),
+]
+
+
+@pytest.mark.parametrize("section, key, shown", BAD_CONTACT_TARGETS)
+@pytest.mark.parametrize("command", ["estimate", "control"])
+def test_a_bad_contact_force_target_exits_2_naming_the_key(tmp_path, capsys, section, key, shown, command):
+    scene = tmp_path / "bad.toml"
+    tail = '[estimate]\nparams = ["shear_modulus"]\nx0 = [20e3]\n' if command == "estimate" else "[control]\n"
+    scene.write_text(FINGER + "\n[target]\n" + section + "\n\n" + tail)
+    assert main([command, str(scene), "--out", str(tmp_path / "out")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and key in lines[0] and shown in lines[0], lines
+    assert not (tmp_path / "out").exists()
+
+
+def test_obstacle_names_are_unique(tmp_path):
+    text = FINGER.replace('name = "wall"', 'name = "table"')
+    with pytest.raises(sf.SceneError, match=r"obstacle\[1\]\.name"):
+        sf.Scene.from_toml(text, tmp_path / "s.toml")

@@ -357,6 +357,10 @@ def test_chunked_integration_saves_the_same_frames(beam, monkeypatch, save_every
     chunked = sf.simulate(beam, 0.01, steps, gravity=GRAVITY, damping=(5.0, 0.0), save_every=save_every, progress=True)
     assert sum(calls) == steps and len(calls) > 1
     _same_trajectory(plain, chunked)
+    # The core's phase times are summed over the chunks: each call reports its own.
+    phases = {"assembly", "factorization", "solve", "line_search", "total"}
+    assert phases <= plain.timings.keys() and phases <= chunked.timings.keys()
+    assert 0.0 < chunked.timings["factorization"] < chunked.timings["total"] <= chunked.timings["simulate"]
 
 
 def test_simulate_progress_is_automatic(beam, monkeypatch, capsys):

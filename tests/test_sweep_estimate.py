@@ -1,5 +1,5 @@
 """`sf.estimate(..., starts=N, client=...)`: the starts of a fit on a Dask cluster give the same
-fit as one after the other."""
+fit as one after the other, with a target on positions or on a contact force."""
 
 from __future__ import annotations
 
@@ -53,3 +53,62 @@ def test_starts_on_a_cluster_give_the_same_fit(tmp_path):
     assert [(e["start"], e["iteration"], e["loss"]) for e in lines] == [
         (e["start"], e["iteration"], e["loss"]) for e in there.history]
     assert [e["start"] for e in lines] == sorted(e["start"] for e in lines) and {e["start"] for e in lines} == {0, 1, 2, 3}
+
+
+def _finger(youngs_modulus: float) -> tuple[sf.Body, sf.Plane]:
+    """A 100 x 20 x 20 mm finger clamped at x = 0, its tendon pulled 4 mm, pressing on a
+    frictionless table 4 mm under its tip."""
+    mesh = sf.Mesh.box(size=(0.1, 0.02, 0.02), cells=(10, 2, 2))
+    body = sf.Body(mesh, sf.NeoHookean(youngs_modulus=youngs_modulus, poisson_ratio=0.3))
+    body.fix(mesh.nodes_on_plane((0, 0, 0), (1, 0, 0)))
+    x = np.linspace(0.0, 0.095, 10)
+    tendon = body.add_cable(sf.Cable(np.c_[x, np.full_like(x, 0.01), np.full_like(x, 0.003)], model="tendon"))
+    body.pull(tendon, displacement=0.004)
+    table = sf.Plane((0.0, 0.0, -0.004), (0.0, 0.0, 1.0))
+    body.add_obstacle(table)
+    return body, table
+
+
+def test_issue_17_a_body_with_contact_pickles_with_its_barrier_stiffness():
+    """The barrier stiffness is fixed at the first solve from the material then: a copy solved
+    with another material must keep the original's, or it is another problem."""
+    body, _ = _finger(100e3)
+    before = sf.solve_static(body, tolerance=1e-11)
+    assert before.active_contacts > 0, "the finger should press on the table"
+    copy = pickle.loads(pickle.dumps(body))
+    copy.material = sf.NeoHookean(youngs_modulus=300e3, poisson_ratio=0.3)
+    body.material = copy.material
+    np.testing.assert_array_equal(sf.solve_static(copy, tolerance=1e-11).positions,
+                                  sf.solve_static(body, tolerance=1e-11).positions)
+
+
+def test_issue_17_a_bound_contact_force_target_pickles_and_binds_again():
+    body, table = _finger(100e3)
+    result = sf.solve_static(body, tolerance=1e-11)
+    bound = sf.Target.contact_force(table, 0.05).bind(body.mesh, body=body)
+    body_copy, bound_copy = pickle.loads(pickle.dumps((body, bound)))
+    assert bound_copy.body is body_copy and bound_copy.model is body_copy.core_model()
+    sf.solve_static(body_copy, tolerance=1e-11)
+    assert bound_copy.residual(result.positions) == pytest.approx(bound.residual(result.positions), rel=1e-12)
+
+
+def test_issue_17_a_contact_force_fit_on_a_cluster_is_the_fit_here():
+    """The Young's modulus of the finger from the force it presses the table with: the starts on
+    two workers end where they end one after the other (before the fix, each worker's body fixed
+    its own barrier stiffness from its start's material, and a bound target did not pickle)."""
+    from dask.distributed import Client
+
+    force = float(np.linalg.norm(sf.solve_static(_finger(100e3)[0], tolerance=1e-11).obstacle_forces[0]))
+    args = dict(params=["youngs_modulus"], x0=[70e3], bounds=[(30e3, 300e3)], starts=2, seed=3)
+    body, table = _finger(70e3)
+    here = sf.estimate(body, sf.Target.contact_force(table, force), **args)
+    body, table = _finger(70e3)
+    bound = sf.Target.contact_force(table, force).bind(body.mesh, body=body)
+    with sf.sweeps.local_cluster(2) as cluster, Client(cluster, set_as_default=False) as client:
+        there = sf.estimate(body, bound, **args, client=client)
+    assert there.params == here.params and there.loss == here.loss
+    assert [s["params"] for s in there.starts] == [s["params"] for s in here.starts]
+    # The truth's own barrier stiffness came from its own material: close, not equal.
+    assert there.params["youngs_modulus"] == pytest.approx(100e3, rel=1e-3)
+    # Here, the first solve of the first start also fixed the barrier stiffness it shares.
+    assert there.forward_solves == here.forward_solves + 1

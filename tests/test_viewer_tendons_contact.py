@@ -1,6 +1,7 @@
 """The viewer's tendons and contact: a tendon's slider is its command (pull in mm or tension in N),
 its solved tension and pull are shown after each solve (slack ones as such); obstacles are drawn
-and contact forces shown as arrows with their scale and the total force per obstacle.
+and contact forces shown as arrows with their scale and the total force per obstacle; a playback
+draws the obstacles and moves those on a path frame by frame.
 
 The slider and arrow logic (sorofem.viewer.commands, sorofem.viewer.contact) is tested without a
 server; the views against a real viser server on a free loopback port (skipped without viser).
@@ -17,7 +18,7 @@ import pytest
 
 import sorofem as sf
 from sorofem.viewer.commands import cable_lines, command_slider, is_slack, nice_ceiling, tension_scale
-from sorofem.viewer.contact import contact_arrows, obstacle_lines, obstacle_meshes
+from sorofem.viewer.contact import contact_arrows, obstacle_lines, obstacle_meshes, obstacle_offsets
 from sorofem.viewer.style import ARROW_LENGTH, ARROW_THRESHOLD, PULL_RANGE_FRACTION
 
 #: The 0.4 m silicone cantilever (8 x 2 x 2 cells) with three cables: a tendon along the top
@@ -210,6 +211,28 @@ def test_contact_arrows_carry_the_weight(contact_scene) -> None:
     assert contact_arrows(free, 1.0).legend == "contact forces: none"
 
 
+def _pressed_block() -> tuple[sf.Body, sf.Trajectory]:
+    """The block of CONTACT_SCENE on its table, pressed by a plate coming down from 20 mm above
+    its top to 2 mm into it over 0.1 s (a path), in 10 steps; the ball and the crate stay put."""
+    body = sf.Scene.from_toml(CONTACT_SCENE, Path("pressed.toml")).body
+    body.add_obstacle(sf.Box((-0.05, -0.05, 0.1021), (0.15, 0.15, 0.15)), path=[[0.0, 0, 0, 0.02], [0.1, 0, 0, -0.004]])
+    return body, sf.simulate(body, 0.01, 10, gravity=(0, 0, -9.81), progress=False)
+
+
+def test_obstacle_offsets_follow_the_path_as_the_solver_moved_it() -> None:
+    body, trajectory = _pressed_block()
+    offsets = obstacle_offsets(body, trajectory.times)
+    assert offsets.shape == (11, 4, 3)
+    np.testing.assert_allclose(offsets, trajectory.obstacle_translations, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(offsets[:, 3, 2], 0.02 - 0.024 * trajectory.times / 0.1, atol=1e-15)
+    assert np.all(offsets[:, :3] == 0.0)
+    # Unmoved, the plate is its box; moved (where static solves hold it), it is 20 mm higher.
+    plate, moved = obstacle_meshes(body, moved=False)[3][0], obstacle_meshes(body)[3][0]
+    assert plate[:, 2].min() == pytest.approx(0.1021) and moved[:, 2].min() == pytest.approx(0.1221)
+    # The plate pressed on the block at the end: the path reached it.
+    assert trajectory.obstacle_forces[-1, 3, 2] < 0
+
+
 def _cantilever() -> sf.Body:
     mesh = sf.Mesh.box(size=(0.4, 0.1, 0.1), cells=(4, 1, 1))
     body = sf.Body(mesh, sf.NeoHookean(youngs_modulus=66e3, poisson_ratio=0.45, density=1080))
@@ -335,3 +358,29 @@ def test_the_playback_shows_a_tendon_s_tension_and_pull(server) -> None:
         assert f"cable 0 (tendon): tension {tension:.4g} N, pull 10 mm" in view.status.content
     finally:
         view.close()
+
+
+def test_the_playback_draws_the_obstacles_and_moves_those_on_a_path(server, monkeypatch, tmp_path) -> None:
+    body, trajectory = _pressed_block()
+    view = build_trajectory_view(trajectory, server)
+    try:
+        assert len(view.obstacles) == 4
+        for handle, (vertices, triangles) in zip(view.obstacles, obstacle_meshes(body, moved=False)):
+            np.testing.assert_allclose(handle.vertices, vertices, atol=1e-6)
+            assert np.array_equal(handle.faces, triangles) and handle.opacity < 1
+        np.testing.assert_allclose(view.obstacles[3].position, [0, 0, 0.02], atol=1e-7)
+        for add in ("add_mesh_simple", "add_glb", "add_point_cloud", "add_line_segments"):
+            monkeypatch.setattr(server.scene, add, lambda *a, **k: pytest.fail("a frame re-created a scene node"))
+        for k in (5, 10, 0):
+            view.slider.value = k
+            for handle, offset in zip(view.obstacles, trajectory.obstacle_translations[k]):
+                np.testing.assert_allclose(handle.position, offset, atol=1e-7)
+    finally:
+        view.close()
+    # A motion read from a .pvd has no obstacles recorded: none drawn.
+    monkeypatch.undo()
+    from_file = build_trajectory_view(trajectory.write_pvd(tmp_path), server)
+    try:
+        assert from_file.frames.n_frames == 11 and from_file.obstacles == []
+    finally:
+        from_file.close()

@@ -11,5 +11,6 @@ from . import dynamics  # noqa: F401
 from . import adjoint  # noqa: F401
 from . import trajectory  # noqa: F401  (the adjoint through time)
 from . import contact  # noqa: F401  (the cantilever on a floor, with and without it)
+from . import contact_finger  # noqa: F401  (a finger on a ball; self-contact on and off)
 from . import sweep  # noqa: F401  (sweeps on a Dask LocalCluster)
 from . import peers  # noqa: F401  (scikit-fem, and the comparison section)

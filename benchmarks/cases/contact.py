@@ -1,10 +1,10 @@
 """Contact: the 0.4 m cantilever sagging onto a floor below its tip, against the same solve
-without the floor."""
+without the floor; the paired runner and columns other contact families share."""
 
 from __future__ import annotations
 
 import time
-from typing import Any
+from typing import Callable
 
 from harness import TABLES, Column, Row, Table, case, col, fmt, mib, ms, ratio, status
 
@@ -12,17 +12,10 @@ from .common import GRAVITY, MATERIAL, TOLERANCE
 
 FLOOR = -0.12  # m: the tip would sag to about -0.13 m without it
 
-TABLES["contact"] = Table(
-    "Contact (sorofem)",
-    "The 0.4 m cantilever of the static table (0.1 x 0.1 m, clamped at x = 0, gravity (0, 0, -9.81), "
-    "E = 66 kPa, nu = 0.45, rho = 1080 kg/m^3, one load step, tolerance 1e-8) above a frictionless floor "
-    "z = -0.12 m (sf.Plane) that stops its tip, against the same solve without the floor; both run in the "
-    "same process, alternating, so that they see the same machine load. Times = `Body`, `fix`, "
-    "`add_obstacle` and `solve_static`, medians. t/it = the solver's own Newton time (report total) / "
-    "Newton iterations. contact pass = the solver's `timings['contact']` (broad phase, barrier and its "
-    "derivatives, their scatter into the free DOFs, the collision-bounded step), share = contact pass / "
-    "report total; CCD = `timings['step_bound']` (continuous collision detection of the line search).",
-    (
+
+def paired_columns(*extra: Column) -> tuple[Column, ...]:
+    """The columns of a with / without contact pair (:func:`paired`), ``extra`` before the repeats."""
+    return (
         col("case", "case", str),
         col("tets", "tets"),
         Column("conv.", status),
@@ -36,10 +29,23 @@ TABLES["contact"] = Table(
                                             (r.get("timings") or {}).get("total")))),
         Column("CCD [ms]", lambda r: ms((r.get("timings") or {}).get("step_bound"))),
         col("active contacts", "active_contacts"),
-        col("floor force [N]", "floor_force"),
+        *extra,
         col("repeats", "repeats"),
         Column("peak RSS [MiB]", mib),
-    ),
+    )
+
+
+TABLES["contact"] = Table(
+    "Contact (sorofem)",
+    "The 0.4 m cantilever of the static table (0.1 x 0.1 m, clamped at x = 0, gravity (0, 0, -9.81), "
+    "E = 66 kPa, nu = 0.45, rho = 1080 kg/m^3, one load step, tolerance 1e-8) above a frictionless floor "
+    "z = -0.12 m (sf.Plane) that stops its tip, against the same solve without the floor; both run in the "
+    "same process, alternating, so that they see the same machine load. Times = `Body`, `fix`, "
+    "`add_obstacle` and `solve_static`, medians. t/it = the solver's own Newton time (report total) / "
+    "Newton iterations. contact pass = the solver's `timings['contact']` (broad phase, barrier and its "
+    "derivatives, their scatter into the free DOFs, the collision-bounded step), share = contact pass / "
+    "report total; CCD = `timings['step_bound']` (continuous collision detection of the line search).",
+    paired_columns(col("floor force [N]", "floor_force")),
 )
 
 
@@ -64,20 +70,23 @@ def _solve(cells: tuple[int, int, int], floor: bool) -> Row:
     return row
 
 
-def _paired(cells: tuple[int, int, int], budget_s: float) -> Row:
+def paired(solve: Callable[[bool], Row], budget_s: float, api: str) -> Row:
+    """``solve(True)`` (with contact) and ``solve(False)`` (without) alternating in this process,
+    up to 7 pairs within ``budget_s``; the row of the median run of each, side by side (the
+    ``_without`` keys: the run without contact)."""
     times: dict[bool, list[float]] = {True: [], False: []}
     results: dict[bool, list[Row]] = {True: [], False: []}
     start = time.perf_counter()
     while len(times[True]) < 7 and (not times[True] or time.perf_counter() - start < budget_s):
-        for floor in (True, False):
+        for on in (True, False):
             t0 = time.perf_counter()
-            results[floor].append(_solve(cells, floor))
-            times[floor].append(time.perf_counter() - t0)
+            results[on].append(solve(on))
+            times[on].append(time.perf_counter() - t0)
 
-    def median(floor: bool) -> tuple[float, Row]:
-        ts = times[floor]
+    def median(on: bool) -> tuple[float, Row]:
+        ts = times[on]
         i = sorted(range(len(ts)), key=ts.__getitem__)[(len(ts) - 1) // 2]
-        return ts[i], results[floor][i]
+        return ts[i], results[on][i]
 
     def per_iteration(res: Row) -> float | None:
         total = (res.get("timings") or {}).get("total")
@@ -85,18 +94,22 @@ def _paired(cells: tuple[int, int, int], budget_s: float) -> Row:
 
     (sec, res), (sec0, res0) = median(True), median(False)
     row: Row = {
-        "api": "sorofem.Plane / Body.add_obstacle / solve_static",
+        "api": api,
         "tets": res["tets"], "converged": res["converged"] and res0["converged"],
         "iterations": res.get("iterations"), "iterations_without": res0.get("iterations"),
         "seconds": sec, "seconds_without": sec0, "seconds_first": times[True][0],
         "all_seconds": times[True], "all_seconds_without": times[False], "repeats": len(times[True]),
         "timings": res.get("timings"), "timings_without": res0.get("timings"),
         "seconds_per_iteration": per_iteration(res), "seconds_per_iteration_without": per_iteration(res0),
-        "active_contacts": res.get("active_contacts"), "floor_force": res.get("floor_force"),
+        **{key: value for key, value in res.items() if key not in ("converged", "iterations", "timings", "tets")},
     }
     if res.get("failure") or res0.get("failure"):
         row["failure"] = res.get("failure") or res0.get("failure")
     return row
+
+
+def _paired(cells: tuple[int, int, int], budget_s: float) -> Row:
+    return paired(lambda floor: _solve(cells, floor), budget_s, "sorofem.Plane / Body.add_obstacle / solve_static")
 
 
 @case("sorofem/contact-cantilever-on-plane-16x4x4", "contact", quick=True)

@@ -637,8 +637,15 @@ class Body:
 
     def __getstate__(self) -> dict[str, Any]:
         # The compiled model does not pickle; a body sent to another process (a Dask worker)
-        # travels without it and builds its own on first use.
-        return {**self.__dict__, "_model": None, "_model_key": None}
+        # travels without it and builds its own on first use. The barrier stiffness its model
+        # fixed at its first solve travels as a setting: the copy must solve as the original
+        # does, not fix its own from whatever material it first solves with.
+        state = {**self.__dict__, "_model": None, "_model_key": None}
+        if self._model is not None and self._contact["stiffness"] is None:
+            fixed = (self._model.contact_settings() or {}).get("stiffness")
+            if fixed is not None:
+                state["_contact"] = {**self._contact, "stiffness": float(fixed)}
+        return state
 
     def __repr__(self) -> str:
         options = "".join(f", {k}={v!r}" for k, v in self.formulation_options.items())

@@ -615,13 +615,14 @@ def _inverse_run(args: argparse.Namespace, scene: Any, section: dict[str, Any], 
         failure = f"the fit did not converge: {fit.message}"
     else:
         ctl = found
+        unit = "N" if scene.target.kind == "contact_force" else "m"
         summary = {**base, **ctl.to_dict(), "history": ctl.history, "converged": ctl.reachable}
         ok, result, fitted = ctl.reachable, ctl.result, ctl
         lines = [
             f"{scene.path.name}: actuation {', '.join(f'{a:.6g}' for a in ctl.actuation)} "
             f"({', '.join(_COMMAND_WORDS[scene.body.commands[c][0]] for c in section['cables'])}) "
             f"of cable(s) {section['cables']} ({section['method']})",
-            f"distance {ctl.distance:.3e} m (rms), max {ctl.max_distance:.3e} m, "
+            f"distance {ctl.distance:.3e} {unit} (rms), max {ctl.max_distance:.3e} {unit}, "
             f"{'reachable' if ctl.reachable else 'NOT reachable'}, {ctl.forward_solves} forward solves",
         ]
         failure = f"target not reachable: {ctl.message}"

@@ -254,7 +254,9 @@ class Trajectory:
     actuation
         The commands used, ``(steps, n_cables)``: alphas (pulls or tensions for tendons).
     timings
-        ``{"simulate": s}``: wall-clock time of the integration.
+        ``{"simulate": s}``, the wall-clock time of the integration, and the core's time per
+        phase over all steps, s: ``assembly``, ``factorization``, ``solve`` (triangular
+        solves), ``line_search``, ``contact``, ``step_bound``, ``total``.
     contact_forces
         With obstacles: the force they exert on each node at each frame, ``(frames, n_nodes,
         3)``, N (``None`` without obstacles).
@@ -289,7 +291,7 @@ class Trajectory:
         self.actuation = actuation
         #: The cables' alphas before the first step, ``(n_cables,)``.
         self.initial_actuation = np.asarray(body.actuations, dtype=np.float64)
-        self.timings = {"simulate": elapsed}
+        self.timings = {"simulate": elapsed, **{k: float(v) for k, v in out.get("timings", {}).items()}}
         contact = out.get("contact")
         k = len(body.obstacles)
         frames = self.times.size
@@ -659,6 +661,8 @@ def _run_in_chunks(
         joined.factorizations.append(np.asarray(out["factorizations"], dtype=np.int64))
         joined.residuals.append(np.asarray(out["residuals"], dtype=np.float64))
         joined.cutbacks += int(out.get("cutbacks", 0))
+        for phase, seconds in out.get("timings", {}).items():
+            joined.timings[phase] = joined.timings.get(phase, 0.0) + float(seconds)
         joined.velocities = out["velocities"]
         joined.done = end
         x, v = positions[-1], np.asarray(out["velocities"], dtype=np.float64)

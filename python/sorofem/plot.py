@@ -412,6 +412,10 @@ def plot_fit(result: Any, path: str | os.PathLike[str] | None = None, *, ax: Any
         fig, axes = _axes(ax, 2, (10.0, 4.5), "ax")
     ax_m, ax_h = axes
     markers = result.markers()
+    # Contact-force targets observe a force (N) where the others observe points (shown in mm).
+    targets = getattr(result, "targets", [])
+    forces = bool(targets) and all(getattr(t, "mode", "") == "contact_force" for _, t in targets)
+    unit, scale, quantity = ("N", 1.0, "F_") if forces else ("mm", 1e3, "")
     if markers:
         every = np.vstack([np.vstack([model, goal]) for model, goal, _ in markers])
         span = every.max(axis=0) - every.min(axis=0)
@@ -428,17 +432,18 @@ def plot_fit(result: Any, path: str | os.PathLike[str] | None = None, *, ax: Any
             ax_m.scatter(model[:, i], model[:, j], s=4, color="k" if len(markers) == 1 else colour,
                          label=f"model{label}")
         ax_m.set_aspect("equal", adjustable="datalim")
-        ax_m.set_xlabel(f"{names[i]} [m]")
-        ax_m.set_ylabel(f"{names[j]} [m]")
+        ax_m.set_xlabel(f"{quantity}{names[i]} [{'N' if forces else 'm'}]")
+        ax_m.set_ylabel(f"{quantity}{names[j]} [{'N' if forces else 'm'}]")
         ax_m.legend(loc="best", fontsize="small")
         distances = np.concatenate([np.linalg.norm(model - goal, axis=1) for model, goal, _ in markers])
-        ax_m.set_title(f"{distances.size} points: rms {1e3 * np.sqrt(np.mean(distances**2)):.3g} mm, "
-                       f"max {1e3 * distances.max(initial=0.0):.3g} mm", fontsize="medium")
+        ax_m.set_title(f"{distances.size} {'force' if forces else 'point'}{'s' if distances.size != 1 else ''}: "
+                       f"rms {scale * np.sqrt(np.mean(distances**2)):.3g} {unit}, "
+                       f"max {scale * distances.max(initial=0.0):.3g} {unit}", fontsize="medium")
     history = [e for e in result.history if np.isfinite(e.get("rms", np.nan))]
     starts = sorted({int(e.get("start", 0)) for e in history})
     for start in starts:
         rows = [e for e in history if int(e.get("start", 0)) == start]
-        ax_h.plot([e["iteration"] for e in rows], [1e3 * e["rms"] for e in rows], "o-", markersize=3,
+        ax_h.plot([e["iteration"] for e in rows], [scale * e["rms"] for e in rows], "o-", markersize=3,
                   label=f"start {start}" if len(starts) > 1 else None)
     rms = np.array([e["rms"] for e in history])
     if rms.size and rms.min() > 0 and rms.max() / rms.min() > 10:  # a log axis only when it spans decades
@@ -449,7 +454,7 @@ def plot_fit(result: Any, path: str | os.PathLike[str] | None = None, *, ax: Any
 
     ax_h.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax_h.set_xlabel("iteration (0: the start)")
-    ax_h.set_ylabel("rms misfit [mm]")
+    ax_h.set_ylabel(f"{'force error' if forces else 'rms misfit'} [{unit}]")
     ax_h.grid(True, which="both", alpha=0.3)
     ax_h.set_title("misfit history", fontsize="medium")
     return _finish(fig, path, own)

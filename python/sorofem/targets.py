@@ -274,16 +274,23 @@ class BoundContactForce:
     model's last static solution, so :meth:`jacobian` is valid at the positions just solved for
     (what the inverse functions ask for). It is exact for frictionless contact; friction's
     lagged normal forces and directions count as constants.
+
+    The compiled model does not pickle: a bound target sent to another process (a Dask worker)
+    travels as its body, obstacle index and goal, and is bound again to that body there.
     """
 
     mode = "contact_force"
 
-    def __init__(self, model: Any, obstacle: int, goal: NDArray[np.float64], n_nodes: int, description: str) -> None:
-        self.model = model
+    def __init__(self, body: Body, obstacle: int, goal: NDArray[np.float64], description: str) -> None:
+        self.body = body
+        self.model = body.core_model()
         self.obstacle = obstacle
         self.goal = goal
-        self.n_nodes = n_nodes
+        self.n_nodes = body.mesh.n_nodes
         self.description = description
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return _bind_contact_force, (self.body, self.obstacle, self.goal, self.description)
 
     @property
     def n_points(self) -> int:
@@ -528,7 +535,7 @@ class Target:
                 raise InputError(f"obstacle: expected an index in [0, {len(placements)}) (the body's obstacles), got {index}")
         goal = self._data["force"]
         what = f"|F| = {goal[0]:g} N" if goal.size == 1 else f"F = {goal.tolist()} N"
-        return BoundContactForce(body.core_model(), index, goal, body.mesh.n_nodes, f"obstacle {index}, {what}")
+        return BoundContactForce(body, index, goal, f"obstacle {index}, {what}")
 
     def __repr__(self) -> str:
         if self.kind == "contact_force":
@@ -536,6 +543,11 @@ class Target:
             what = f"|F| = {goal[0]:g} N" if goal.size == 1 else f"F = {goal.tolist()} N"
             return f"Target.contact_force({self._data['obstacle']!r}, {what})"
         return f"Target.{self.kind}(...)"
+
+
+def _bind_contact_force(body: Body, obstacle: int, goal: NDArray[np.float64], description: str) -> BoundContactForce:
+    """A contact-force target bound again where it is unpickled (see :class:`BoundContactForce`)."""
+    return BoundContactForce(body, obstacle, goal, description)
 
 
 def _points_array(value: ArrayLike, name: str, k: int | None) -> NDArray[np.float64]:

@@ -156,6 +156,10 @@ def _remote_starts(client: Any, start_points: list[Any], first_start: int, histo
     solves counted in ``problem`` and their history appended to ``history_file``."""
     for k, theta_start in enumerate(start_points):
         problem.params.check(theta_start, f"start {k}")
+    # One run after the other fixes the barrier stiffness at the first solve of the first start,
+    # and every start shares it: fixed here, it travels with the body to the workers.
+    lo, hi = setup[9], setup[10]
+    problem.fix_contact_stiffness(np.clip(problem.params.to_s(start_points[0]), lo, hi))
     futures = [client.submit(_start_on_worker, first_start + k, theta, setup, pure=False)
                for k, theta in enumerate(start_points)]
     runs = []
@@ -249,8 +253,10 @@ def estimate(
         A ``dask.distributed.Client``: with more than one start, the starts run on its
         workers side by side, each an independent fit as without a client (the same path
         and optimum of every start; the body travels without its compiled model, which
-        each worker builds); the final evaluation runs here. ``verbose`` lines are not
-        printed for remote starts; the history file is written here as starts finish.
+        each worker builds, but with its barrier stiffness, fixed here first by a solve at
+        the first start if no solve fixed it yet); the final evaluation runs here.
+        ``verbose`` lines are not printed for remote starts; the history file is written
+        here as starts finish.
     max_evaluations
         Budget of objective evaluations per start (each is one solve per scenario), from 1 to
         100,000 (a documented limit).

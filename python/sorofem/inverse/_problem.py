@@ -192,6 +192,18 @@ class Problem:
             return r_all, grad
         return r_all, None
 
+    def fix_contact_stiffness(self, s: NDArray[np.float64]) -> None:
+        """Fix the barrier stiffness, which a model with contact takes at its first solve from
+        the material then, by solving the first scenario at ``s`` (what the first evaluation at
+        ``s`` does); the scenario's warm start is left as it was. Nothing to do once fixed."""
+        settings = self.model.contact_settings()
+        if settings is None or settings["stiffness"] is not None:
+            return
+        sc = self.scenarios[0]
+        initial = sc.initial
+        self._solve(sc, self.params.state(self.params.from_s(s)))
+        sc.initial = initial
+
     def restore(self) -> None:
         """Give the model back the body's own material and cable values."""
         self.body.core_model()

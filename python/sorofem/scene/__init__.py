@@ -85,6 +85,7 @@ Schema
     [[obstacle]]               # optional: A rigid obstacle the body cannot pass through (contact by Incremental
                                # Potential Contact, optional Coulomb friction): exactly one of plane, sphere, box
                                # or mesh.
+    # name = "table"           # name of the obstacle, unique; [target] contact_force may then name it
     plane = { point = [0, 0, -0.06], normal = [0, 0, 1] }   # a half-space (a floor, a wall), m
     # sphere = { center = [0.3, 0.05, -0.1], radius = 0.03 }   # a solid ball, m
     # box = { min = [0.3, 0, -0.2], max = [0.4, 0.1, -0.1] }   # a solid axis-aligned box (sorofem.Box), m
@@ -115,9 +116,10 @@ Schema
                                          # in m or tension in N (tendons, as commanded) (default: each cable keeps
                                          # its command), s, -
 
-    [target]                   # optional: Where parts of the body should be (sorofem.Target), for sorofem
-                               # estimate / control: exactly one of nodes, points or surface; nodes and points
-                               # with positions or positions_file.
+    [target]                   # optional: What sorofem estimate / control should meet (sorofem.Target): where
+                               # parts of the body should be, or the force an obstacle exerts on it; exactly one
+                               # of nodes, points, surface or contact_force; nodes and points with positions or
+                               # positions_file.
     nodes = [17, 18, 19]       # observed mesh nodes (with positions)
     # points = [[0.1, 0.01, 0.01]]   # observed marker points at rest, inside the mesh (with positions), m
     positions = [[0.1, 0, -0.01], [0.1, 0.02, -0.01], [0.1, 0.02, 0.01]]   # goal position of each node or point,
@@ -128,6 +130,8 @@ Schema
     # surface = "goal.obj"     # goal surface file, relative to the scene file
     # scale = 1                # coordinate scale of the surface files
     # rest = "rest.obj"        # the body's own rest surface (default: the mesh boundary)
+    # contact_force = { obstacle = "table", force = 0.05 }   # the total force an [[obstacle]] should exert on the
+                                                             # body, instead of positions, N
 
     [estimate]                 # optional: sorofem estimate (sorofem.estimate): fit these parameters so that the
                                # equilibrium meets [target].

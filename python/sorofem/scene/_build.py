@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -238,8 +238,14 @@ def apply_obstacles(
         body.set_contact(**contact)
     except ParameterError as exc:
         raise check.error(f"contact.{exc.parameter or 'dhat'}", str(exc)) from None
+    names: dict[str, int] = {}
     for i, entry in enumerate(entries):
         prefix = f"obstacle[{i}]"
+        if "name" in entry:
+            if entry["name"] in names:
+                raise check.error(f"{prefix}.name", f"{entry['name']!r} already names obstacle[{names[entry['name']]}]; "
+                                  "expected a unique name")
+            names[entry["name"]] = i
         obstacle: Obstacle
         if "plane" in entry:
             key = f"{prefix}.plane"
@@ -265,6 +271,32 @@ def apply_obstacles(
         except InputError as exc:
             raise check.error(prefix, str(exc)) from None
     return files
+
+
+def _contact_force_target(check: Checker, table: dict[str, Any], body: Body,
+                          obstacles: Sequence[dict[str, Any]]) -> Target:
+    """``[target] contact_force``: the obstacle by name or index, bound to the body."""
+    key = "target.contact_force.obstacle"
+    which = table["obstacle"]
+    names = [entry.get("name") for entry in obstacles]
+    if isinstance(which, str):
+        if which not in names:
+            given = [n for n in names if n is not None]
+            raise check.error(key, f"no [[obstacle]] is named {which!r}; "
+                              + (f"expected one of {given}" if given else "give the [[obstacle]] a name = ...")
+                              + " or its index")
+        index = names.index(which)
+    else:
+        index = which
+        if index >= len(obstacles):
+            raise check.error(key, f"obstacle index {index} out of range: the scene has {len(obstacles)} [[obstacle]] "
+                              "entries")
+    try:
+        target = Target.contact_force(index, table["force"])
+        target.bind(body.mesh, body=body)
+    except InputError as exc:
+        raise check.error("target.contact_force", str(exc)) from None
+    return target
 
 
 def apply_cables(check: Checker, entries: list[dict[str, Any]], body: Body) -> list[Cable]:
@@ -363,9 +395,14 @@ def build_output(check: Checker, table: dict[str, Any], formulation: str, base: 
     return out
 
 
-def build_target(check: Checker, table: dict[str, Any], body: Body, base: Path) -> tuple[Target, list[Path]]:
-    """The target, and the surface files it was read from."""
+def build_target(
+    check: Checker, table: dict[str, Any], body: Body, base: Path, obstacles: Sequence[dict[str, Any]] = ()
+) -> tuple[Target, list[Path]]:
+    """The target, and the surface files it was read from (``obstacles``: the ``[[obstacle]]``
+    entries a contact force may name)."""
     files: dict[str, Path] = {}
+    if "contact_force" in table:
+        return _contact_force_target(check, table["contact_force"], body, obstacles), []
     if "surface" in table:
         for name in ("surface", "rest"):
             if name in table:

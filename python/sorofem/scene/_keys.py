@@ -308,6 +308,10 @@ _CABLE = Table(
 
 _OBSTACLE = Table(
     {
+        "name": Field(
+            String(pattern=_NAME, pattern_doc="a name of letters, digits, '_' and '-'"),
+            "name of the obstacle, unique; [target] contact_force may then name it", example="table", commented=True,
+        ),
         "plane": Field(
             Table(
                 {
@@ -417,16 +421,35 @@ _TARGET = Table(
         "scale": Field(Number(Range(gt=0)), "coordinate scale of the surface files", default=1.0, commented=True),
         "rest": Field(String(), "the body's own rest surface (default: the mesh boundary)", example="rest.obj",
                       commented=True),
+        "contact_force": Field(
+            Table(
+                {
+                    "obstacle": Field(
+                        Either((String(pattern=_NAME, pattern_doc="a name of letters, digits, '_' and '-'"),
+                                Integer(ge=0))),
+                        "the [[obstacle]]: its name, or its index (0-based, in file order)", required=True,
+                    ),
+                    "force": Field(Either((Number(Range(ge=0)), _VEC3)),
+                                   "the goal: a force [fx, fy, fz], or a magnitude >= 0 (whatever its direction)",
+                                   "N", required=True),
+                },
+                hint=' like { obstacle = "table", force = 0.05 }',
+                doc="The total force an obstacle exerts on the body (sorofem.Target.contact_force).",
+            ),
+            "the total force an [[obstacle]] should exert on the body, instead of positions", "N",
+            example={"obstacle": "table", "force": 0.05}, commented=True,
+        ),
     },
     choices=(
         Choice((
             Group(("nodes",), ("positions", "positions_file")), Group(("points",), ("positions", "positions_file")),
-            Group(("surface",), ("scale", "rest")),
+            Group(("surface",), ("scale", "rest")), Group(("contact_force",)),
         )),
         Choice((Group(("positions",)), Group(("positions_file",))), required=False),
     ),
-    doc="Where parts of the body should be (sorofem.Target), for sorofem estimate / control: exactly one of nodes, "
-    "points or surface; nodes and points with positions or positions_file.",
+    doc="What sorofem estimate / control should meet (sorofem.Target): where parts of the body should be, or the "
+    "force an obstacle exerts on it; exactly one of nodes, points, surface or contact_force; nodes and points with "
+    "positions or positions_file.",
 )
 
 #: Parameter names [estimate] accepts (sorofem.inverse's for every model), material ones optionally ":REGION".

@@ -248,7 +248,7 @@ class Scene:
             target = like.target
             target_files = [f for f in like.input_files if f not in (like.path, like.mesh.source)]
         elif "target" in data:
-            target, target_files = build_target(check, data["target"], body, path.parent)
+            target, target_files = build_target(check, data["target"], body, path.parent, data["obstacle"])
         estimate = build_estimate(check, data["estimate"], regions) if "estimate" in data else None
         control = build_control(check, data["control"], body) if "control" in data else None
         output = build_output(check, data["output"], formulation, path.parent)

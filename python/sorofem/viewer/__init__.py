@@ -31,7 +31,8 @@ checkboxes, playback and camera: :func:`serving.per_client` on viser's client ha
 frame slider, a play/pause button, the playback speed (multiples of real time) and a loop
 toggle. Each frame redraws the one surface, coloured by displacement magnitude (one colour
 scale, 0 .. the largest displacement of the whole motion, shown by a colour bar), and moves the
-cables; nothing is re-created.
+cables and the obstacles on a path (a :class:`~sorofem.Trajectory` draws its body's obstacles; a
+``.pvd`` does not record them); nothing is re-created.
 
 Needs the optional extra ``viewer`` (viser, trimesh): ``pip install ".[viewer]"`` from a checkout
 of sorofem (README, "Install"). :func:`build_view` takes any

@@ -1,6 +1,7 @@
 """Obstacles and contact in the viewer: the triangles each obstacle is drawn with (a plane as a
-finite quad around the body, a sphere as a UV sphere, boxes and triangle surfaces as they are),
-the contact forces as arrows and the side panel's totals per obstacle.
+finite quad around the body, a sphere as a UV sphere, boxes and triangle surfaces as they are)
+and where a moving one is at each frame of a playback, the contact forces as arrows and the side
+panel's totals per obstacle.
 
 Plain functions of a body and a result: no viser here, so they are tested without a server.
 """
@@ -18,23 +19,37 @@ from ..static import StaticResult
 from .commands import nice_ceiling
 from .style import ARROW_LENGTH, ARROW_THRESHOLD, PLANE_EXTENT
 
-__all__ = ["obstacle_meshes", "ContactArrows", "contact_arrows", "obstacle_lines"]
+__all__ = ["obstacle_meshes", "obstacle_offsets", "ContactArrows", "contact_arrows", "obstacle_lines"]
 
 
-def obstacle_meshes(body: Body) -> list[tuple[NDArray[np.float64], NDArray[np.int64]]]:
+def obstacle_meshes(body: Body, moved: bool = True) -> list[tuple[NDArray[np.float64], NDArray[np.int64]]]:
     """Per obstacle of ``body``, the ``(vertices (n, 3) m, triangles (m, 3))`` to draw it with,
-    where it is at ``t = 0`` (static solves hold a moving obstacle there). A plane is the quad
-    of half-sizes ``PLANE_EXTENT`` times the body's extents around the body's centre, projected
-    on the plane."""
+    where it is at ``t = 0`` (static solves hold a moving obstacle there; ``moved=False``: where
+    it is before its path's translation, for a playback that moves it frame by frame, see
+    :func:`obstacle_offsets`). A plane is the quad of half-sizes ``PLANE_EXTENT`` times the
+    body's extents around the body's centre, projected on the plane."""
     lo, hi = body.mesh.bounds
     centre, extent = 0.5 * (lo + hi), PLANE_EXTENT * (hi - lo)
+    offsets = obstacle_offsets(body, np.zeros(1))[0]
     out = []
-    for placement in body.obstacles:
+    for k, placement in enumerate(body.obstacles):
         vertices, triangles = obstacle_surface(placement.obstacle, extent, centre)
-        if placement.path is not None:
-            vertices = vertices + np.array([np.interp(0.0, placement.path[:, 0], placement.path[:, k])
-                                            for k in (1, 2, 3)])
+        if moved:
+            vertices = vertices + offsets[k]
         out.append((np.asarray(vertices, dtype=np.float64), np.asarray(triangles, dtype=np.int64)))
+    return out
+
+
+def obstacle_offsets(body: Body, times: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The translation of each obstacle of ``body`` along its path at each of ``times`` (s),
+    ``(len(times), n_obstacles, 3)`` m: its keyframes interpolated linearly and held outside
+    them, as the solver moves it; zero for an obstacle that stays put."""
+    times = np.asarray(times, dtype=np.float64).reshape(-1)
+    out = np.zeros((times.size, len(body.obstacles), 3))
+    for k, placement in enumerate(body.obstacles):
+        if placement.path is not None:
+            out[:, k] = np.stack([np.interp(times, placement.path[:, 0], placement.path[:, c]) for c in (1, 2, 3)],
+                                 axis=1)
     return out
 
 

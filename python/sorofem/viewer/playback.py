@@ -23,9 +23,19 @@ from ..scene import Scene
 from ..static import StaticResult
 from . import serving
 from .colours import colour_bar_html, colour_by_magnitude, surface_edges, surface_glb
+from .contact import obstacle_meshes, obstacle_offsets
 from .frames import Frames, load_frames
 from .serving import CORE_LOCK
-from .style import CABLE_COLOUR, FIXED_COLOUR, PLAYBACK_FPS, REST_COLOUR, SPEEDS, WIREFRAME_THICKNESS
+from .style import (
+    CABLE_COLOUR,
+    FIXED_COLOUR,
+    OBSTACLE_COLOUR,
+    OBSTACLE_OPACITY,
+    PLAYBACK_FPS,
+    REST_COLOUR,
+    SPEEDS,
+    WIREFRAME_THICKNESS,
+)
 
 __all__ = ["TrajectoryView", "build_trajectory_view", "view_trajectory", "simulate_in_chunks", "CHUNK_SECONDS"]
 
@@ -66,6 +76,11 @@ class TrajectoryView:
         The colour bar (HTML: the map, ``|u|`` in mm from 0 to ``vmax``).
     cables
         One line-segments handle per cable.
+    obstacles
+        One mesh handle per obstacle of the trajectory's body (none when played from a
+        ``.pvd``, which does not record them), placed at ``obstacle_offsets[frame]``.
+    obstacle_offsets
+        ``(frames, n_obstacles, 3)`` each obstacle's translation along its path at each frame, m.
     slider, play_button, speed_dropdown, loop_checkbox, wireframe_checkbox, status, header
         The GUI handles.
     frames_shown
@@ -85,6 +100,8 @@ class TrajectoryView:
     wireframe: Any = None
     colour_bar: Any = None
     cables: list[Any] = field(default_factory=list)
+    obstacles: list[Any] = field(default_factory=list)
+    obstacle_offsets: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 0, 3)), repr=False)
     rest: Any = None
     slider: Any = None
     play_button: Any = None
@@ -149,6 +166,8 @@ class TrajectoryView:
                 self.wireframe.points, self.wireframe.colors = self._wireframe(frame)
             for c, handle in enumerate(self.cables):
                 handle.points = self._cable_segments(frame, c)
+            for k, handle in enumerate(self.obstacles):
+                handle.position = self.obstacle_offsets[frame, k]
             if self.status is not None:
                 self.status.content = self._summary()
             self.frames_shown += 1
@@ -368,6 +387,15 @@ def build_trajectory_view(
             f"/motion/cables/{c}", view._cable_segments(0, c), CABLE_COLOUR, thickness=3.0, thickness_units="screen",
         ))
     view._handles += view.cables
+    body = frames.trajectory.body if frames.trajectory is not None else None
+    if body is not None and body.obstacles:
+        view.obstacle_offsets = obstacle_offsets(body, frames.times)
+        for k, (vertices, triangles) in enumerate(obstacle_meshes(body, moved=False)):
+            view.obstacles.append(server.scene.add_mesh_simple(
+                f"/motion/obstacles/{k}", vertices.astype(np.float32), triangles.astype(np.uint32),
+                color=OBSTACLE_COLOUR, opacity=OBSTACLE_OPACITY, side="double", position=view.obstacle_offsets[0, k],
+            ))
+        view._handles += view.obstacles
 
     gui = server.gui
     name = Path(frames.source).name if frames.source != "trajectory" else "trajectory"

@@ -547,7 +547,7 @@ impl Model {
             &setup.newton,
         );
         if setup.method != StepMethod::Newton {
-            reuse.last_norm = None;
+            reuse.start_solve();
             problem.reuse = Some(reuse.clone());
         }
         if problem.model.terms.contact.is_some() {

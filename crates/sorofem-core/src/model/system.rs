@@ -16,7 +16,10 @@ use crate::newton::{AuxiliaryIterates, Merit, NewtonOptions, NewtonProblem};
 use crate::report::Timings;
 use std::time::Instant;
 
+mod reuse;
 mod tendon_state;
+
+pub(crate) use reuse::FactorReuse;
 
 /// The Newton view of a model at a load factor.
 pub(super) struct System<'a> {
@@ -166,42 +169,6 @@ impl StepTerms {
     fn add_hessian(&self, pattern: &crate::linear::LowerPattern, hessian: &mut [f64]) {
         for d in 0..self.inertia.len() {
             hessian[pattern.col_ptr[d]] += self.inertia[d] + self.mass_damping[d];
-        }
-    }
-}
-
-/// Modified Newton for a sequence of solves (the steps of a simulation): directions
-/// `d = -H_kept^{-1} g` from a factorisation kept across iterations and solves, until the
-/// residual falls by less than `max_ratio` in an iteration (or the kept factor gives no
-/// descent direction, or the active contacts changed); the next direction then factorises the
-/// Hessian at its iterate.
-#[derive(Clone, Debug)]
-pub(crate) struct FactorReuse {
-    /// The model factor's [`crate::linear::SparseFactor::generation`] when it was kept.
-    pub(crate) kept: Option<u64>,
-    /// The active contacts the kept factorisation holds ([`crate::contact::ContactPass::active_set`];
-    /// 0 without contact): a stencil that became active since has no curvature in it, and its
-    /// direction would run into the obstacle up to the collision bound.
-    pub(crate) contact_set: u64,
-    /// The residual norm at the last direction of the current solve.
-    pub(crate) last_norm: Option<f64>,
-    pub(crate) max_ratio: f64,
-    /// Directions computed with the kept factorisation.
-    pub(crate) reused: usize,
-    /// Which displacement-controlled tendons were taut where it was factorised (see
-    /// `System::taut`): when the active set changes, the next direction refactorises.
-    pub(crate) taut: Vec<bool>,
-}
-
-impl FactorReuse {
-    pub(crate) fn new(max_ratio: f64) -> Self {
-        FactorReuse {
-            kept: None,
-            contact_set: 0,
-            last_norm: None,
-            max_ratio,
-            reused: 0,
-            taut: Vec::new(),
         }
     }
 }
@@ -399,6 +366,13 @@ impl System<'_> {
         }
     }
 
+    /// Whether kept-factor directions are refined by secant pairs (see [`FactorReuse`]): the
+    /// update needs an energy merit and the same energy at every iterate (a contact's barrier
+    /// stiffness may change between them).
+    fn learns_secants(&self) -> bool {
+        self.merit() == Merit::Energy && self.contact.is_none() && self.step.is_some()
+    }
+
     /// A direction from the kept factorisation of [`FactorReuse`], when there is one, the
     /// residual fell enough since the last direction, the same tendons are taut as where it was
     /// factorised and it gives a usable direction.
@@ -420,7 +394,21 @@ impl System<'_> {
         {
             return None;
         }
-        let d = self.solve_with_factor(z, g, timings)?;
+        let d = if self.learns_secants() {
+            let x = self.free_values(z);
+            let reuse = self.reuse.as_mut().expect("checked above");
+            reuse.secants.record(x, g);
+            let secants = std::mem::take(&mut reuse.secants);
+            // solve_with_factor gives -H_0^{-1} q; the update needs +H_0^{-1} q.
+            let d = secants.apply_inverse(g, |q| {
+                self.solve_with_factor(z, q, timings)
+                    .map(|d| d.into_iter().map(|v| -v).collect())
+            });
+            self.reuse.as_mut().expect("checked above").secants = secants;
+            d?.into_iter().map(|v| -v).collect()
+        } else {
+            self.solve_with_factor(z, g, timings)?
+        };
         let usable = self.is_usable(&d, g);
         let reuse = self.reuse.as_mut().expect("checked above");
         if !usable {
@@ -617,7 +605,12 @@ impl NewtonProblem for System<'_> {
         timings.factorization += seconds;
         timings.factorizations += 1;
         let taut = self.taut(z);
+        let x = self.learns_secants().then(|| self.free_values(z));
         if let Some(reuse) = &mut self.reuse {
+            reuse.secants.clear();
+            if let Some(x) = x {
+                reuse.secants.record(x, g);
+            }
             reuse.kept = ok.then(|| self.model.factor.generation());
             reuse.contact_set = contact_set;
             reuse.last_norm = Some(g_norm);

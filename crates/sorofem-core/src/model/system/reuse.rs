@@ -1,0 +1,198 @@
+//! Modified Newton across the solves of a simulation: a kept factorisation, refined by the
+//! secant pairs of the current solve (L-BFGS with the kept factor as its initial inverse).
+
+/// Modified Newton for a sequence of solves (the steps of a simulation): directions
+/// `d = -H_kept^{-1} g` from a factorisation kept across iterations and solves, until the
+/// residual falls by less than `max_ratio` in an iteration (or the kept factor gives no
+/// descent direction, or the active contacts changed); the next direction then factorises the
+/// Hessian at its iterate.
+///
+/// Where the merit is the energy (standard formulation, no displacement-controlled tendon, no
+/// contact), each direction corrects the kept factor by the secant pairs of the iterates since
+/// it was factorised in the current solve ([`SecantPairs`]): the kept Hessian's drift over a
+/// step is then learnt instead of costing linear convergence.
+#[derive(Clone, Debug)]
+pub(crate) struct FactorReuse {
+    /// The model factor's [`crate::linear::SparseFactor::generation`] when it was kept.
+    pub(crate) kept: Option<u64>,
+    /// The active contacts the kept factorisation holds ([`crate::contact::ContactPass::active_set`];
+    /// 0 without contact): a stencil that became active since has no curvature in it, and its
+    /// direction would run into the obstacle up to the collision bound.
+    pub(crate) contact_set: u64,
+    /// The residual norm at the last direction of the current solve.
+    pub(crate) last_norm: Option<f64>,
+    pub(crate) max_ratio: f64,
+    /// Directions computed with the kept factorisation.
+    pub(crate) reused: usize,
+    /// Which displacement-controlled tendons were taut where it was factorised (see
+    /// `System::taut`): when the active set changes, the next direction refactorises.
+    pub(crate) taut: Vec<bool>,
+    /// The current solve's secant pairs since the kept factorisation.
+    pub(crate) secants: SecantPairs,
+}
+
+impl FactorReuse {
+    pub(crate) fn new(max_ratio: f64) -> Self {
+        FactorReuse {
+            kept: None,
+            contact_set: 0,
+            last_norm: None,
+            max_ratio,
+            reused: 0,
+            taut: Vec::new(),
+            secants: SecantPairs::default(),
+        }
+    }
+
+    /// Forgets what belongs to one solve (the next has its own energy).
+    pub(crate) fn start_solve(&mut self) {
+        self.last_norm = None;
+        self.secants.clear();
+    }
+}
+
+/// How many secant pairs the inverse update keeps: more than a step's iterations need.
+const MAX_PAIRS: usize = 8;
+
+/// A pair is used only when its curvature `s.y` is at least this fraction of `|s| |y|`, which
+/// keeps the update's inverse positive definite and well conditioned.
+const MIN_CURVATURE: f64 = 1e-10;
+
+/// The secant pairs `s_k = x_(k+1) - x_k`, `y_k = g_(k+1) - g_k` (free DOFs) of one solve's
+/// iterates, for the L-BFGS two-loop recursion (Nocedal and Wright, *Numerical Optimization*,
+/// algorithm 7.4) around an initial inverse Hessian.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct SecantPairs {
+    pairs: Vec<(Vec<f64>, Vec<f64>, f64)>,
+    last: Option<(Vec<f64>, Vec<f64>)>,
+}
+
+impl SecantPairs {
+    pub(crate) fn clear(&mut self) {
+        self.pairs.clear();
+        self.last = None;
+    }
+
+    /// Records the iterate `x` with gradient `g`; with the previous one, a pair.
+    pub(crate) fn record(&mut self, x: Vec<f64>, g: &[f64]) {
+        if let Some((x0, g0)) = self.last.take() {
+            let s: Vec<f64> = x.iter().zip(&x0).map(|(a, b)| a - b).collect();
+            let y: Vec<f64> = g.iter().zip(&g0).map(|(a, b)| a - b).collect();
+            let sy = dot(&s, &y);
+            if sy > MIN_CURVATURE * (dot(&s, &s) * dot(&y, &y)).sqrt() {
+                if self.pairs.len() == MAX_PAIRS {
+                    self.pairs.remove(0);
+                }
+                self.pairs.push((s, y, 1.0 / sy));
+            }
+        }
+        self.last = Some((x, g.to_vec()));
+    }
+
+    #[cfg(test)]
+    fn is_empty(&self) -> bool {
+        self.pairs.is_empty()
+    }
+
+    /// `H^{-1} g` of the updated inverse, given `initial(q) = H_0^{-1} q`; `None` when the
+    /// initial inverse fails.
+    pub(crate) fn apply_inverse(
+        &self,
+        g: &[f64],
+        initial: impl FnOnce(&[f64]) -> Option<Vec<f64>>,
+    ) -> Option<Vec<f64>> {
+        let mut q = g.to_vec();
+        let mut alphas = Vec::with_capacity(self.pairs.len());
+        for (s, y, rho) in self.pairs.iter().rev() {
+            let alpha = rho * dot(s, &q);
+            q.iter_mut().zip(y).for_each(|(qi, yi)| *qi -= alpha * yi);
+            alphas.push(alpha);
+        }
+        let mut r = initial(&q)?;
+        for ((s, y, rho), alpha) in self.pairs.iter().zip(alphas.iter().rev()) {
+            let beta = rho * dot(y, &r);
+            r.iter_mut()
+                .zip(s)
+                .for_each(|(ri, si)| *ri += (alpha - beta) * si);
+        }
+        Some(r)
+    }
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const A: [[f64; 3]; 3] = [[4.0, 1.0, 0.0], [1.0, 3.0, 0.5], [0.0, 0.5, 2.0]];
+
+    fn times_a(x: &[f64]) -> Vec<f64> {
+        (0..3)
+            .map(|i| (0..3).map(|j| A[i][j] * x[j]).sum())
+            .collect()
+    }
+
+    fn solve_a(b: &[f64]) -> Vec<f64> {
+        // Gauss-Seidel converges for this diagonally dominant A.
+        let mut x = vec![0.0; 3];
+        for _ in 0..200 {
+            for i in 0..3 {
+                let off: f64 = (0..3).filter(|&j| j != i).map(|j| A[i][j] * x[j]).sum();
+                x[i] = (b[i] - off) / A[i][i];
+            }
+        }
+        x
+    }
+
+    fn quadratic_pairs() -> SecantPairs {
+        let mut secants = SecantPairs::default();
+        for x in [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [0.2, 1.0, 1.0],
+        ] {
+            secants.record(x.to_vec(), &times_a(&x));
+        }
+        secants
+    }
+
+    /// The update meets the secant equation of its newest pair: H^{-1} y = s, from any
+    /// positive definite initial inverse.
+    #[test]
+    fn the_newest_secant_equation_holds() {
+        let secants = quadratic_pairs();
+        let (s, y) = ([-0.8, 0.0, 1.0], times_a(&[-0.8, 0.0, 1.0]));
+        let x = secants
+            .apply_inverse(&y, |q| Some(q.to_vec()))
+            .expect("identity");
+        for (xi, si) in x.iter().zip(s) {
+            assert!((xi - si).abs() < 1e-12, "{x:?} vs {s:?}");
+        }
+    }
+
+    /// Pairs of a quadratic leave its exact inverse unchanged (each already meets them).
+    #[test]
+    fn an_exact_initial_inverse_is_kept() {
+        let secants = quadratic_pairs();
+        let g = [0.3, -0.7, 1.1];
+        let x = secants
+            .apply_inverse(&g, |q| Some(solve_a(q)))
+            .expect("solve");
+        for (xi, ti) in x.iter().zip(solve_a(&g)) {
+            assert!((xi - ti).abs() < 1e-12, "{xi} vs {ti}");
+        }
+    }
+
+    /// A pair without positive curvature is not used.
+    #[test]
+    fn a_pair_of_negative_curvature_is_skipped() {
+        let mut secants = SecantPairs::default();
+        secants.record(vec![0.0, 0.0], &[0.0, 0.0]);
+        secants.record(vec![1.0, 0.0], &[-1.0, 0.0]);
+        assert!(secants.is_empty());
+    }
+}
