@@ -129,6 +129,17 @@ def targets(rows: dict[str, Row], array_dir: Path) -> str:
         add("1 s of hammerbot dynamics: default method time / newton (same run)", "sorofem/hammerbot-dynamics-1s",
             good and ratio(good["seconds"], newton["seconds"]), 1.0, "x")
 
+    # Issue 18: real time in the fast mode at 20k tets, and the largest mesh that runs in real time.
+    realtime = {name: r for name, r in rows.items() if in_table(name, "realtime") and ok_row(name)}
+    for name, r in realtime.items():
+        if 20_000 <= r["tets"] <= 30_000:
+            add("1 s of dynamics at 20-30k tets in the fast mode: real-time factor (issue 18)", name,
+                r["realtime_factor"], 1.0)
+    in_time = [r["tets"] for r in realtime.values() if r["realtime_factor"] <= 1.0]
+    if realtime:
+        lines.append("| largest mesh simulated in real time in the fast mode (issue 18: report it) | "
+                     f"sorofem/realtime-* | {max(in_time) if in_time else 'none'} tets | - | - |")
+
     # Adjoint.
     r = rows.get("sorofem/hammerbot-adjoint")
     if r is not None:

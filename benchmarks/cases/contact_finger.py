@@ -43,6 +43,12 @@ TABLES["self-contact"] = Table(
 
 
 def _finger(cells: tuple[int, int, int], ball: bool) -> Row:
+    body = _finger_body(cells, ball)
+    return _solved(body, (0.0, 0.0, 0.0), ball, lambda r: {"ball_force": float(np.linalg.norm(r.obstacle_forces[0]))})
+
+
+def _finger_body(cells: tuple[int, int, int], ball: bool) -> Any:
+    """The finger with its tendon pulled (and the ball, when ``ball``), not yet solved."""
     import sorofem as sf
 
     mesh = sf.Mesh.box(size=FINGER_SIZE, cells=cells)
@@ -53,7 +59,7 @@ def _finger(cells: tuple[int, int, int], ball: bool) -> Row:
     body.pull(tendon, displacement=FINGER_PULL)
     if ball:
         body.add_obstacle(sf.Sphere(center=BALL_CENTER, radius=BALL_RADIUS))
-    return _solved(body, (0.0, 0.0, 0.0), ball, lambda r: {"ball_force": float(np.linalg.norm(r.obstacle_forces[0]))})
+    return body
 
 
 def _c_shape(cells: tuple[int, int, int], gravity: float, self_contact: bool) -> Row:

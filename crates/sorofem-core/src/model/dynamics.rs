@@ -321,9 +321,25 @@ impl Model {
                         pending.push((h / 2.0, depth + 1));
                     }
                     Err(Error::NotConverged { mut report, .. }) => {
+                        // Without a residual the step never had a finite energy: its start state
+                        // (extrapolated from the last steps' velocities) inverts an element.
+                        let why = if report.residual_history.is_empty() {
+                            "the step's start state (extrapolated from the velocities) inverts an element, so its energy is not finite: the motion is too fast for this dt or step method".to_string()
+                        } else {
+                            format!(
+                                "last relative residuals: {:?}",
+                                report
+                                    .residual_history
+                                    .iter()
+                                    .rev()
+                                    .take(5)
+                                    .rev()
+                                    .map(|r| format!("{r:.3e}"))
+                                    .collect::<Vec<_>>()
+                            )
+                        };
                         let message = format!(
-                            "time step {s} (t = {time:.4} s) did not converge even at dt = {h:.3e} s; last relative residuals: {:?}",
-                            report.residual_history.iter().rev().take(5).rev().map(|r| format!("{r:.3e}")).collect::<Vec<_>>()
+                            "time step {s} (t = {time:.4} s) did not converge even at dt = {h:.3e} s; {why}"
                         );
                         report.message = message.clone();
                         return Err(Error::NotConverged { message, report });
