@@ -2,9 +2,16 @@
 
 Only values found in a source that can be named precisely are listed; every entry carries
 the source's own words (``source.quote``), where in the source they are (``source.location``),
-the test mode and strain range when the source states them, and the density from the
-manufacturer's technical bulletin. Parameters are converted to SI (Pa for ``c``/``mu``, 1/Pa
-for ``d``) under the names of :mod:`sorofem.fitting.models`.
+the test mode and strain range when the source states them, and the density with its source.
+Parameters are converted to SI (Pa for ``c``/``mu``, 1/Pa for ``d``; the sources give MPa, so
+the conversion is an exact factor 1e6) under the names of :mod:`sorofem.fitting.models`.
+
+A source that gives the material as incompressible (no ``d1``) is listed so: ``params`` has no
+``d1`` and ``bulk_modulus`` is ``None``. The ready material of :data:`sorofem.materials.library`
+then needs a compressibility the source does not give; it uses ``ready_params``, which add
+``d1`` for Poisson's ratio :data:`ASSUMED_POISSON_RATIO` at the small-strain shear modulus,
+and says so (``d1_assumed`` in ``to_dict()``). For closer incompressibility give a smaller
+``d1`` with ``formulation="mixed"``.
 
 Entries
 -------
@@ -15,11 +22,27 @@ Entries
     Pneumatic Actuators*, Demo 1 (the coefficients of its Abaqus material file, in MPa: the
     tool's models are in mm, N and MPa). Density 1070 kg/m^3 (Smooth-On Ecoflex technical
     bulletin: specific gravity 1.07 g/cc).
+``elastosil-m4601``
+    Wacker Elastosil M4601, 2-term Yeoh ``c10 = 110000 Pa``, ``c20 = 20000 Pa``, incompressible
+    in the source (small-strain shear modulus 0.22 MPa). Source: the Soft Robotics Toolkit's
+    PneuNets *Modeling* tutorial (Abaqus), "Overview of model components", which gives the
+    density too: 1130 kg/m^3.
+``elastosil-m4601-neo-hookean``
+    Wacker Elastosil M4601, neo-Hookean ``C10 = 0.12 MPa`` (Abaqus's ``C10 (I1b - 3)``: a 1-term
+    Yeoh, ``c10 = 120000 Pa``), incompressible in the source (shear modulus 0.24 MPa). Source:
+    the Soft Robotics Toolkit's fiber-reinforced actuator *Finite Element Modeling* tutorial,
+    "Overview of model components"; density from the PneuNets tutorial (1130 kg/m^3).
 
-What the literature search did not yield (so no entry): coefficients for Ecoflex 00-10 and
-00-50, Dragon Skin 10/20/30, Sylgard 184 and Elastosil M4601 in a text that could be quoted
-(Marechal et al., *Soft Robotics* 8(3), 2021; Di Lecce et al., *Front. Robot. AI* 8, 2022;
-Polygerinos et al., *IEEE T-RO* 31(3), 2015 were found, but not their tables).
+What the literature search did not yield (so no entry): coefficients for Ecoflex 00-10, 00-20
+and 00-50, Dragon Skin 10/20/30, Sylgard 184 and Smooth-Sil in a text that could be quoted, and
+a second Ecoflex 00-30 fit. Found but not readable beyond their first page: Marechal et al.,
+*Soft Robotics* 8(3), 2021 (Table III, Yeoh/Ogden/Mooney-Rivlin/Neo-Hookean fits of 17
+elastomers; raw data Zenodo 10.5281/zenodo.3611329); Xavier, Fleming and Yong, *Adv. Intell.
+Syst.*, 2021 (its table of silicone coefficients); Polygerinos et al., *IEEE T-RO* 31(3), 2015;
+Tawk and Alici, *Robotics*, 2020; Steck et al., *J. Appl. Polym. Sci.* 135, 47025, 2018; Di Lecce
+et al., *Front. Robot. AI* 8, 2022.
+Values met only in secondary text (a project page or note quoting a fit without its source
+text) were not used.
 
 Examples
 --------
@@ -30,6 +53,9 @@ Examples
 >>> from sorofem.fitting import nominal_stress
 >>> round(float(nominal_stress(entry.model, "uniaxial", [2.0], entry.incompressible_params)[0]))
 43917
+>>> elastosil = library["elastosil-m4601"]
+>>> elastosil.bulk_modulus is None, round(2 / elastosil.ready_params["d1"] / elastosil.shear_modulus, 1)
+(True, 49.7)
 """
 
 from __future__ import annotations
@@ -38,7 +64,12 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any, Mapping
 
-__all__ = ["LibraryEntry", "Source", "StatedValue", "library"]
+__all__ = ["ASSUMED_POISSON_RATIO", "LibraryEntry", "Source", "StatedValue", "library"]
+
+#: Poisson's ratio at small strain that fixes ``d1`` of the ready material when the source gives the
+#: material as incompressible: nearly incompressible like silicone, yet usable with the standard
+#: (displacement) formulation on linear tetrahedra.
+ASSUMED_POISSON_RATIO = 0.49
 
 
 @dataclass(frozen=True)
@@ -81,7 +112,8 @@ class StatedValue:
 @dataclass(frozen=True)
 class LibraryEntry:
     """One material: ``model``/``terms`` and ``params`` as :func:`sorofem.fitting.nominal_stress`
-    takes them (SI), ``density`` in kg/m^3, and the sources of both."""
+    takes them (SI; no ``d1`` when the source gives the material as incompressible), ``density``
+    in kg/m^3, and the sources of both."""
 
     name: str
     product: str
@@ -118,6 +150,23 @@ class LibraryEntry:
         """The coefficients without the volumetric compliances (``d_i = 0``)."""
         return {k: v for k, v in self.params.items() if not k.startswith("d")}
 
+    @property
+    def d1_assumed(self) -> bool:
+        """``True`` when the source gives the material as incompressible, so that ``ready_params``
+        carry a ``d1`` of :data:`ASSUMED_POISSON_RATIO` rather than the source's."""
+        return self.params.get("d1", 0.0) <= 0
+
+    @property
+    def ready_params(self) -> dict[str, float]:
+        """``params`` with a ``d1`` for the FE materials: the source's, or, for an incompressible
+        source, ``d1 = 2 / K`` with ``K = 2 mu (1 + nu) / (3 (1 - 2 nu))`` (1/Pa) at the small-strain
+        shear modulus ``mu`` and ``nu =`` :data:`ASSUMED_POISSON_RATIO`."""
+        if not self.d1_assumed:
+            return dict(self.params)
+        nu = ASSUMED_POISSON_RATIO
+        bulk = 2.0 * self.shear_modulus * (1.0 + nu) / (3.0 * (1.0 - 2.0 * nu))
+        return {**self.params, "d1": 2.0 / bulk}
+
     def to_dict(self) -> dict[str, Any]:
         """Plain data for ``summary.json``: model, parameters, density and the full citations."""
 
@@ -127,8 +176,10 @@ class LibraryEntry:
 
         return {"name": self.name, "product": self.product, "model": self.model, "terms": self.terms,
                 "params": dict(self.params), "density": self.density, "shear_modulus": self.shear_modulus,
-                "bulk_modulus": self.bulk_modulus, "source": source(self.source),
-                "density_source": source(self.density_source), "notes": self.notes}
+                "bulk_modulus": self.bulk_modulus, "ready_d1": self.ready_params["d1"],
+                "d1_assumed": (f"not in the source (incompressible there): Poisson's ratio {ASSUMED_POISSON_RATIO} "
+                               "at the small-strain shear modulus") if self.d1_assumed else None,
+                "source": source(self.source), "density_source": source(self.density_source), "notes": self.notes}
 
 
 _SMOOTH_ON_ECOFLEX = Source(
@@ -156,6 +207,34 @@ _TOOLKIT_OGDEN = Source(
           "D1 = 2.93; D2 = 0; D3 = 0",
 )
 
+_TOOLKIT_PNEUNETS = Source(
+    authors=None,
+    year=None,
+    title="Modeling (the PneuNet actuator's finite element analysis in Abaqus)",
+    publisher="softroboticstoolkit.com",
+    location="section 'Overview of model components', first material (the tutorial's Abaqus model of the PneuNet "
+             "actuator; coefficients without a unit on the page, read as MPa)",
+    url="http://softroboticstoolkit.com/book/export/html/165596",
+    quote="Elastosil M4601 silicone rubber: Yeoh strain energy potential defined by the coefficients C10 = 0.11, "
+          "C20 = 0.02. Density of 1130 Kg/m³, assumed isotropic",
+)
+
+_TOOLKIT_FIBER_REINFORCED = Source(
+    authors=None,
+    year=None,
+    title="Finite Element Modeling (a fiber-reinforced actuator in Abaqus)",
+    publisher="softroboticstoolkit.com",
+    location="section 'Overview of model components', Materials, first item",
+    url="http://softroboticstoolkit.com/book/fr-modeling",
+    quote="Elastosil M4601 silicone rubber: neo-Hookean strain energy potential defined by the coefficient "
+          "C10 = 0.12MPa.",
+)
+
+_INCOMPRESSIBLE_NOTE = (
+    "The source gives no D1 (an incompressible material, the Abaqus default without D1); the ready material "
+    "of sf.materials.library uses d1 for Poisson's ratio 0.49 (ready_params), which is not from the source. "
+    "The source states no test mode or strain range. ")
+
 library: Mapping[str, LibraryEntry] = MappingProxyType({
     "ecoflex-00-30": LibraryEntry(
         name="ecoflex-00-30",
@@ -174,5 +253,32 @@ library: Mapping[str, LibraryEntry] = MappingProxyType({
               "(43.9 kPa incompressible) is 0.64 times the bulletin's 100% modulus (68.9 kPa). Drucker stable "
               "in uniaxial, equibiaxial and planar tests from stretch 0.1 to 10. The bulletin's numbers were checked "
               "against a quotation of it; the bulletin itself could not be opened when this entry was written.",
+    ),
+    "elastosil-m4601": LibraryEntry(
+        name="elastosil-m4601",
+        product="Wacker Elastosil M4601",
+        model="yeoh",
+        terms=2,
+        params={"c10": 0.11e6, "c20": 0.02e6},
+        density=1130.0,
+        source=_TOOLKIT_PNEUNETS,
+        density_source=_TOOLKIT_PNEUNETS,
+        notes=_INCOMPRESSIBLE_NOTE + "The page gives C10 and C20 without a unit; they are read as MPa, the "
+              "stress unit of the toolkit's Abaqus tutorials (the fiber-reinforced tutorial states C10 = 0.12MPa for "
+              "the same silicone, see elastosil-m4601-neo-hookean; small-strain shear moduli 0.22 and 0.24 MPa). "
+              "Drucker stable in uniaxial, equibiaxial and planar tests at every stretch (c10, c20 > 0).",
+    ),
+    "elastosil-m4601-neo-hookean": LibraryEntry(
+        name="elastosil-m4601-neo-hookean",
+        product="Wacker Elastosil M4601",
+        model="yeoh",
+        terms=1,
+        params={"c10": 0.12e6},
+        density=1130.0,
+        source=_TOOLKIT_FIBER_REINFORCED,
+        density_source=_TOOLKIT_PNEUNETS,
+        notes=_INCOMPRESSIBLE_NOTE + "Abaqus's neo-Hookean potential C10 (I1b - 3) is the 1-term Yeoh model, so "
+              "the entry is given as Yeoh with c10 alone (small-strain shear modulus 2 c10 = 0.24 MPa). The density "
+              "is the PneuNets tutorial's, for the same silicone.",
     ),
 })

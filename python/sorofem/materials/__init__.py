@@ -131,10 +131,11 @@ def material_class(name: str) -> type[Material]:
 
 
 def _library_material(entry: LibraryEntry) -> Material:
-    """The material of a :mod:`sorofem.material_library` entry, with the entry as its source."""
+    """The material of a :mod:`sorofem.material_library` entry (its ``ready_params``: an
+    incompressible source's ``d1`` is assumed), with the entry as its source."""
     spec = next(m for m in MODELS.values() if m.core_name == entry.model)
     values: dict[str, Any] = {}
-    for name, value in entry.params.items():
+    for name, value in entry.ready_params.items():
         base, vector, _ = name.partition(":")
         if vector:
             values.setdefault(base, []).append(value)
@@ -145,6 +146,7 @@ def _library_material(entry: LibraryEntry) -> Material:
 
 #: Published silicones, ready to use: name -> material (its ``source`` holds the citation, where
 #: in the source the values are, the source's own words, the test mode and strain range when
-#: stated, and the density's source; ``summary.json`` carries it). The entries are listed in
+#: stated, the density's source, and whether ``d1`` was assumed for a source that gives the
+#: material as incompressible; ``summary.json`` carries it). The entries are listed in
 #: :mod:`sorofem.material_library`.
 library: Mapping[str, Material] = MappingProxyType({name: _library_material(e) for name, e in _entries.items()})
