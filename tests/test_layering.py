@@ -42,7 +42,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("inverse._optimizers",),
     ("inverse._analysis",),
     ("inverse._trajectory",),
-    ("inverse._control_dynamics",),
+    ("inverse._estimate_dynamics", "inverse._control_dynamics"),
     ("inverse._gradient", "inverse._estimate", "inverse._control"),
     ("inverse",),
     ("scene._spec",),

@@ -184,6 +184,30 @@ def trajectory_gradient(
     """The core's trajectory adjoint; ``objective(positions (steps + 1, n, 3))`` returns the
     flat ``(steps + 1) 3 n`` derivative."""
 
+class _TrajectorySensitivity(TypedDict):
+    positions: _F
+    iterations: list[int]
+    dx: _F
+
+def trajectory_sensitivity(
+    model: Model,
+    gravity: _F,
+    forces: Any,
+    prescribed: Any,
+    dt: float,
+    actuation: _F,
+    directions: list[dict[str, Any]],
+    mass_damping: float = 0.0,
+    stiffness_damping: float = 0.0,
+    initial_positions: _F | None = None,
+    initial_velocities: _F | None = None,
+    tolerance: float | None = None,
+    max_iterations: int | None = None,
+) -> _TrajectorySensitivity:
+    """The core's forward trajectory sensitivities: per direction (``Model.forward``'s keys,
+    ``"mass_damping"``, ``"stiffness_damping"``) the change of every frame, ``dx`` of shape
+    ``(directions, steps + 1, n, 3)``."""
+
 class SolveOptions:
     """Newton settings, validated once (ParameterError naming the bad one).
 

@@ -1,6 +1,7 @@
 //! `sorofem._core`: the Python face of sorofem-core. Plumbing only: conversions live in
 //! `convert`, error mapping in `errors`, and every class forwards to the core: `Mesh` (`mesh`),
-//! `Model` (`model`), `SolveOptions` (`options`), `trajectory_gradient` (`trajectory`); the
+//! `Model` (`model`), `SolveOptions` (`options`), `trajectory_gradient` and
+//! `trajectory_sensitivity` (`trajectory`); the
 //! obstacle and contact checks in `contact`; long calls that Ctrl-C stops in `interrupt`.
 
 mod contact;
@@ -41,6 +42,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(contact::check_obstacle, m)?)?;
     m.add_function(wrap_pyfunction!(contact::check_contact, m)?)?;
     m.add_function(wrap_pyfunction!(trajectory::trajectory_gradient, m)?)?;
+    m.add_function(wrap_pyfunction!(trajectory::trajectory_sensitivity, m)?)?;
     m.add_class::<mesh::Mesh>()?;
     m.add_class::<model::Model>()?;
     m.add_class::<options::SolveOptions>()?;

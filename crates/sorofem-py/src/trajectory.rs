@@ -102,3 +102,97 @@ pub fn trajectory_gradient<'py>(
     out.set_item("stiffness_damping", gradient.stiffness_damping)?;
     Ok(out)
 }
+
+/// The trajectory of `trajectory_gradient` and its forward sensitivities (see
+/// `Model::trajectory_sensitivity` in the core): `directions` is a list of dicts with the keys
+/// of `Model.forward`'s direction and optionally "mass_damping" (1/s) and "stiffness_damping"
+/// (s). Returns {"positions" (steps + 1, n, 3), "iterations", "dx" (directions, steps + 1, n,
+/// 3)}.
+#[pyfunction]
+#[pyo3(signature = (model, gravity, forces, prescribed, dt, actuation, directions, mass_damping = 0.0, stiffness_damping = 0.0, initial_positions = None, initial_velocities = None, tolerance = None, max_iterations = None))]
+#[allow(clippy::too_many_arguments)]
+pub fn trajectory_sensitivity<'py>(
+    py: Python<'py>,
+    mut model: PyRefMut<'py, Model>,
+    gravity: &Bound<'py, PyAny>,
+    forces: &Bound<'py, PyAny>,
+    prescribed: &Bound<'py, PyAny>,
+    dt: f64,
+    actuation: &Bound<'py, PyAny>,
+    directions: Vec<Bound<'py, PyDict>>,
+    mass_damping: f64,
+    stiffness_damping: f64,
+    initial_positions: Option<&Bound<'py, PyAny>>,
+    initial_velocities: Option<&Bound<'py, PyAny>>,
+    tolerance: Option<f64>,
+    max_iterations: Option<usize>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let n = model.inner.mesh().n_nodes();
+    let loads = convert::loads(py, n, gravity, forces, prescribed)?;
+    let actuation = convert::matrix("actuation", actuation, Some(model.inner.n_cables())).py(py)?;
+    let flat = |param: &str, a: Option<&Bound<'py, PyAny>>| -> PyResult<Option<Vec<f64>>> {
+        a.filter(|a| !a.is_none())
+            .map(|a| convert::points(param, a).map(|p| p.into_iter().flatten().collect()))
+            .transpose()
+            .py(py)
+    };
+    let x0 = flat("initial_positions", initial_positions)?;
+    let v0 = flat("initial_velocities", initial_velocities)?;
+    let newton = Model::solve_options(py, None, tolerance, max_iterations, None)?;
+    let damping = sorofem_core::Damping {
+        mass: mass_damping,
+        stiffness: stiffness_damping,
+    };
+    let zeros = model.inner.param_zeros();
+    let mut deltas = Vec::with_capacity(directions.len());
+    for direction in &directions {
+        let params = direction.copy()?;
+        let coefficient = |key: &str| -> PyResult<f64> {
+            let value = params
+                .get_item(key)?
+                .map(|v| v.extract::<f64>())
+                .transpose()?;
+            if value.is_some() {
+                params.del_item(key)?;
+            }
+            Ok(value.unwrap_or(0.0))
+        };
+        let (mass, stiffness) = (
+            coefficient("mass_damping")?,
+            coefficient("stiffness_damping")?,
+        );
+        deltas.push(sorofem_core::model::trajectory::TrajectoryDirection {
+            params: convert::param_direction(&params, &zeros).py(py)?,
+            mass_damping: mass,
+            stiffness_damping: stiffness,
+        });
+    }
+    let inner = &mut model.inner;
+    let (record, changes) = guarded(py, || {
+        inner.trajectory_sensitivity(
+            &loads,
+            dt,
+            &actuation,
+            damping,
+            x0.as_deref(),
+            v0.as_deref(),
+            &newton,
+            &deltas,
+        )
+    })?;
+    let out = PyDict::new(py);
+    let frames = record.positions.len();
+    let positions: Vec<f64> = record.positions.into_iter().flatten().collect();
+    out.set_item(
+        "positions",
+        PyArray1::from_vec(py, positions).reshape([frames, n, 3])?,
+    )?;
+    out.set_item("iterations", record.iterations)?;
+    let count = changes.len();
+    let dx: Vec<f64> = changes.into_iter().flatten().flatten().collect();
+    out.set_item(
+        "dx",
+        PyArray1::from_vec(py, dx).reshape([count, frames, n, 3])?,
+    )?;
+    Ok(out)
+}

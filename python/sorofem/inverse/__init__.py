@@ -10,7 +10,8 @@ solves, forward and adjoint sensitivities from the extension):
 * :func:`estimate`: fit material parameters so that a :class:`~sorofem.Target` is met, by
   least squares (Levenberg-Marquardt on the Jacobian from forward sensitivities), L-BFGS-B
   (adjoint gradient of ``1/2 |r|^2``) or Nelder-Mead (no derivatives); several scenarios
-  jointly, several starts, Gauss-Newton uncertainty.
+  jointly, several starts, Gauss-Newton uncertainty; with ``dynamics=``, damping (and
+  material) parameters from recorded marker tracks of a motion (:func:`marker_tracks`).
 * :func:`control`: cable commands (spring alphas, tendon pulls or tensions) that bring a
   target as close as possible; with ``dynamics=``, an open-loop schedule of them (keyframes)
   that brings it there at a time T and keeps it there (:class:`ScheduleResult`).
@@ -58,6 +59,7 @@ from ._analysis import PROFILE_CONDITION
 from ._control import control
 from ._control_dynamics import DYNAMICS_KEYS, ScheduleResult
 from ._estimate import TornHistoryWarning, estimate
+from ._estimate_dynamics import DAMPING_PARAMETERS, marker_tracks
 from ._gradient import gradient
 from ._parameters import PARAMETERS, parameter_names
 from ._problem import DEFAULT_TOLERANCE
@@ -74,6 +76,8 @@ __all__ = [
     "TRAJECTORY_PARAMETERS",
     "TrajectoryGradientResult",
     "estimate",
+    "marker_tracks",
+    "DAMPING_PARAMETERS",
     "control",
     "GradientResult",
     "FitResult",
@@ -86,6 +90,6 @@ __all__ = [
 ]
 
 # Documented (and pickled) as members of this package, whichever private module holds them.
-for _public in (gradient, trajectory_gradient, TrajectoryGradientResult, estimate, control, parameter_names, GradientResult, FitResult, ControlResult, ScheduleResult, Uncertainty,
+for _public in (gradient, trajectory_gradient, TrajectoryGradientResult, estimate, marker_tracks, control, parameter_names, GradientResult, FitResult, ControlResult, ScheduleResult, Uncertainty,
                 Profile, TornHistoryWarning):
     _public.__module__ = __name__

@@ -21,6 +21,7 @@ from ..progress import Progress
 from ..solver import SolveOptions
 from ._analysis import PROFILE_CONDITION, PROFILE_SPAN, material_std, profile_index, profile_span
 from ._analysis import profile as profile_along
+from ._estimate_dynamics import estimate_dynamics
 from ._optimizers import Recorder, bound_sides, levenberg_marquardt, scipy_minimize, uncertainty
 from ._parameters import Parameters
 from ._problem import DEFAULT_TOLERANCE, Problem, final_results, fitted_material
@@ -204,8 +205,10 @@ def estimate(
     client: Any = None,
     profile: bool | str | None = None,
     profile_values: ArrayLike | None = None,
+    dynamics: Mapping[str, Any] | None = None,
 ) -> FitResult:
-    """Fit material parameters so that the body's equilibrium meets a target.
+    """Fit material parameters so that the body's equilibrium meets a target, or damping (and
+    material) parameters so that its motion meets recorded marker tracks (``dynamics=``).
 
     Minimises ``1/2 sum_scenarios |r|^2`` over the parameters, optimised in log space (logit
     for the Poisson ratio), so that mu and lambda, orders of magnitude apart, are equally
@@ -299,6 +302,26 @@ def estimate(
         The values of the profiled parameter, in its units (default: 9 points over four
         standard errors either side of the optimum, at most a factor 1000 either way in the
         optimiser's scaling, within the bounds; from the bound for a parameter on one).
+    dynamics
+        Fit to motion: the recorded run as ``dict(dt=, steps=, actuation=, damping=, initial=,
+        initial_velocity=, gravity=, tolerance=, max_iterations=)`` (the arguments of
+        :func:`sorofem.simulate`; ``dt`` and ``steps`` required, ``gravity``, ``tolerance``
+        and ``max_iterations`` default to this function's). ``target`` is then the marker
+        tracks, ``[(time, Target), ...]`` with every time a frame ``k dt`` of the run
+        (:func:`sorofem.inverse.marker_tracks` builds them from a ``(frames, markers, 3)``
+        array); the residual is every track's misfit at its frame. ``params`` may name
+        ``"mass_damping"`` (alpha_M, 1/s) and ``"stiffness_damping"`` (beta_K, s) besides the
+        scalar material parameters, ``density`` and ``cable_stiffness``; all are optimised in
+        log space, the damping's start is ``x0`` or ``dynamics["damping"]`` (> 0 for a fitted
+        one), which also holds the coefficient not fitted. Every trajectory is simulated by
+        full Newton to ``tolerance`` per step. ``"least-squares"`` takes its Jacobian, and
+        every method its Gauss-Newton uncertainty, from the forward (tangent-linear)
+        trajectory sensitivity (one extra solve per step and parameter with the step's
+        factorised Hessian); ``"l-bfgs-b"`` follows the adjoint gradient
+        (:func:`sorofem.trajectory_gradient`). ``fit.trajectory`` is the run at the optimum,
+        ``fit.forward_solves`` counts simulated runs. ``starts``, ``scenarios``,
+        ``regularization``, ``load_steps``, ``options``, ``client``, ``history_path`` and
+        ``resume`` are refused with it.
 
     Returns
     -------
@@ -319,7 +342,26 @@ def estimate(
     >>> fit = sf.estimate(body, target, ["shear_modulus", "lame_lambda"], x0=[20e3, 0.2e6],
     ...                   gravity=(0, 0, -9.81))          # doctest: +SKIP
     >>> fit.params, fit.youngs_modulus, fit.uncertainty.relative_std  # doctest: +SKIP
+
+    From the motion of a marker at the tip, sampled every 50 ms of a 0.5 s swing:
+
+    >>> tracks = sf.inverse.marker_tracks(times, [[0.4, 0.05, 0.05]], recorded)  # doctest: +SKIP
+    >>> fit = sf.estimate(body, tracks, ["mass_damping", "stiffness_damping"],
+    ...                   dynamics=dict(dt=0.01, steps=50, damping=(1.0, 0.01)),
+    ...                   gravity=(0, 0, -9.81))  # doctest: +SKIP
     """
+    if dynamics is not None:
+        given = {"starts": starts is not None, "scenarios": scenarios is not None, "regularization": regularization != 0,
+                 "load_steps": load_steps != 1, "options": options is not None, "client": client is not None,
+                 "history_path": history_path is not None, "resume": resume is not False}
+        refused = [name for name, on in given.items() if on]
+        if refused:
+            raise InputError(f"dynamics: a fit to motion does not take {', '.join(refused)} (one recorded run, "
+                             "one start); leave them out")
+        return estimate_dynamics(
+            body, target, params, x0, dynamics=dynamics, bounds=bounds, method=method, regions=regions,
+            gravity=gravity, tolerance=tolerance, max_iterations=max_iterations, max_evaluations=max_evaluations,
+            xtol=xtol, ftol=ftol, verbose=verbose, progress=progress, profile=profile, profile_values=profile_values)
     methods = ("least-squares", "l-bfgs-b", "nelder-mead")
     if method not in methods:
         raise InputError(f"method: expected one of {list(methods)}, got {method!r}")

@@ -260,7 +260,7 @@ class FitResult:
         Root-mean-square distance of the observed points from their goals, m.
     forward_solves
         Static solves, all starts and the profile together (warm-started; failed attempts
-        included).
+        included); for a fit to motion, simulated trajectories.
     newton_iterations
         Newton iterations over those solves.
     iterations
@@ -275,7 +275,11 @@ class FitResult:
     starts
         Per start: its initial point, final params, loss and forward solves.
     results
-        One :class:`~sorofem.StaticResult` per scenario at the optimum.
+        One :class:`~sorofem.StaticResult` per scenario at the optimum (empty for a fit to
+        motion).
+    trajectory
+        A fit to motion (``estimate(..., dynamics=...)``): the :class:`~sorofem.Trajectory` at
+        the optimum, else None.
     """
 
     params: dict[str, Any]
@@ -294,13 +298,22 @@ class FitResult:
     starts: list[dict[str, Any]] = field(default_factory=list)
     results: list[Any] = field(default_factory=list)
     profile: Profile | None = None
-    #: ``(name, BoundTarget)`` of each scenario, in the order of :attr:`results`.
-    targets: list[tuple[str, Any]] = field(default_factory=list)
+    #: ``(name, BoundTarget)`` of each scenario, in the order of :attr:`results`; for a fit to
+    #: motion ``(time (s), BoundTarget)`` of each marker track.
+    targets: list[tuple[Any, Any]] = field(default_factory=list)
+    trajectory: Any = None
 
     def markers(self) -> list[tuple[NDArray[np.float64], NDArray[np.float64], str]]:
         """Per scenario: where the fitted model puts the observed points ``(k, 3)``, their goals
-        ``(k, 3)`` (m) and the scenario's name (what ``fit.png`` shows)."""
-        return _markers(self.targets, self.results)
+        ``(k, 3)`` (m) and the scenario's name (what ``fit.png`` shows); for a fit to motion one
+        entry, every track's points at its frame stacked."""
+        if self.trajectory is None:
+            return _markers(self.targets, self.results)
+        times, positions = self.trajectory.times, self.trajectory.positions
+        frames = [positions[int(np.argmin(np.abs(times - t)))] for t, _ in self.targets]
+        model = [target.points(x) for (_, target), x in zip(self.targets, frames)]
+        goal = [target.matched_goal(x) for (_, target), x in zip(self.targets, frames)]
+        return [(np.vstack(model), np.vstack(goal), "marker tracks")] if model else []
 
     @property
     def youngs_modulus(self) -> Any:
@@ -353,7 +366,7 @@ class FitResult:
         try:
             p = model.parameter(kind)
         except KeyError:
-            return name, {"cable_stiffness": "N/m"}.get(kind, "")
+            return name, {"cable_stiffness": "N/m", "mass_damping": "1/s", "stiffness_damping": "s"}.get(kind, "")
         return p.symbol + (f":{region}" if region else ""), p.units
 
     def summary(self) -> str:

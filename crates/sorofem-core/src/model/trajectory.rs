@@ -29,6 +29,13 @@
 //! `steps / every + every + 1` states of `n_full + n_free` values are held (`every ~
 //! sqrt(steps)`: about `2 sqrt(steps)` states; `every = 1` keeps every state and recomputes
 //! none), besides the node positions of every step that the objective reads (`(steps + 1) 3 n`).
+//!
+//! [`Model::trajectory_sensitivity`] (in `forward`) differentiates the same steps forwards:
+//! the change of every frame along given parameter directions (a Jacobian for least squares).
+
+mod forward;
+
+pub use forward::TrajectoryDirection;
 
 use super::dynamics::{Damping, DynamicsOptions, StepMethod, StepSetup, StepState};
 use super::system::FactorReuse;
@@ -298,29 +305,20 @@ impl Model {
         })
     }
 
-    /// Step k of the adjoint sweep: `lambda_k` from the step's Hessian at its end, then its
-    /// share of every derivative.
-    #[allow(clippy::too_many_arguments)]
-    fn adjoint_step(
+    /// Factors step k's Hessian `H_k = dr_k/du_{k+1}` at its converged end `z1` (the tendons as
+    /// the step's solve had them there) and returns the damped internal force `F(z1)` that
+    /// beta_K scales (free DOFs, N; the tendons' force out). The tendons keep their tensions
+    /// divided by the internal scale `1 + beta_K / h`.
+    pub(super) fn factor_step_end(
         &mut self,
         setup: &StepSetup,
-        loads: &Loads,
-        layout: &ParamLayout,
         h: f64,
         k: usize,
-        commands: &[f64],
-        start: &StepState,
-        end: &StepState,
+        z1: &[f64],
         end_tensions: &[f64],
-        d_frame: &[f64],
-        sweep: &mut Sweep,
-    ) -> Result<()> {
-        self.set_step_commands(commands)?;
-        let n3 = 3 * self.mesh.n_nodes();
+    ) -> Result<Vec<f64>> {
         let (alpha_m, beta_k) = (setup.damping.mass, setup.damping.stiffness);
         let scale = 1.0 + beta_k / h;
-        let (z0, z1) = (&start.z, &end.z);
-        let n_free = setup.free.len();
         // The tendons as the step's solve had them at its end, their tensions (multipliers or
         // commands) divided by the internal scale: their force is the motor's, not damped.
         for (tendon, &t) in self.terms.tendons.tendons.iter_mut().zip(end_tensions) {
@@ -355,6 +353,33 @@ impl Model {
         for (g, &d) in damped_force.iter_mut().zip(&setup.free) {
             *g -= tendon_force[d];
         }
+        Ok(damped_force)
+    }
+
+    /// Step k of the adjoint sweep: `lambda_k` from the step's Hessian at its end, then its
+    /// share of every derivative.
+    #[allow(clippy::too_many_arguments)]
+    fn adjoint_step(
+        &mut self,
+        setup: &StepSetup,
+        loads: &Loads,
+        layout: &ParamLayout,
+        h: f64,
+        k: usize,
+        commands: &[f64],
+        start: &StepState,
+        end: &StepState,
+        end_tensions: &[f64],
+        d_frame: &[f64],
+        sweep: &mut Sweep,
+    ) -> Result<()> {
+        self.set_step_commands(commands)?;
+        let n3 = 3 * self.mesh.n_nodes();
+        let (alpha_m, beta_k) = (setup.damping.mass, setup.damping.stiffness);
+        let scale = 1.0 + beta_k / h;
+        let (z0, z1) = (&start.z, &end.z);
+        let n_free = setup.free.len();
+        let damped_force = self.factor_step_end(setup, h, k, z1, end_tensions)?;
 
         let mut lambda: Vec<f64> = (0..n_free)
             .map(|f| {

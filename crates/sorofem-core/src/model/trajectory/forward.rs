@@ -1,0 +1,262 @@
+//! Forward (tangent-linear) sensitivities of a trajectory: the change of every frame's node
+//! positions along given parameter directions, by differentiating each implicit Euler step
+//! (the step residual `r_k` of the module above). Along a direction `delta` (the parameter
+//! blocks and the Rayleigh coefficients), the free DOFs' change solves, step after step,
+//!
+//! ```text
+//! H_k du_{k+1} = (2 M / h^2 + alpha_M M / h) du_k - M / h^2 du_{k-1}
+//!              + beta_K / h P K_F(z_k) du_k - dr_k/dtheta . delta,        du_0 = du_{-1} = 0
+//! ```
+//!
+//! with `H_k` the step's own Hessian at its converged end (taut displacement-controlled tendons
+//! bordering it, their pulls held, as in [`crate::sensitivity`]) and `K_F` the Hessian of the
+//! damped internal force. The initial state is data: it does not move with the parameters.
+//! Cost: one extra factorisation per step and one solve per direction and step; memory: the
+//! positions' change of every frame and direction (`directions (steps + 1) 3 n` values).
+
+use super::RecordedPositions;
+use crate::energy::HessianMode;
+use crate::error::{Error, Result};
+use crate::model::dynamics::{Damping, DynamicsOptions, StepMethod, StepSetup, StepState};
+use crate::model::{Loads, Model};
+use crate::newton::NewtonOptions;
+use crate::sensitivity::{add_derivative_along, dot, schur_solve, ParamLayout, ParamVector};
+
+/// A direction in parameter space: the blocks of [`Model::param_zeros`] (missing ones are
+/// zero) and the changes of alpha_M (1/s) and beta_K (s).
+#[derive(Clone, Debug, Default)]
+pub struct TrajectoryDirection {
+    pub params: ParamVector,
+    pub mass_damping: f64,
+    pub stiffness_damping: f64,
+}
+
+/// One direction as the forward sweep carries it: its parameter blocks laid out flat, and the
+/// free DOFs' change at the last two frames.
+struct Tangent {
+    delta: Vec<f64>,
+    mass_damping: f64,
+    stiffness_damping: f64,
+    current: Vec<f64>,
+    previous: Vec<f64>,
+}
+
+impl Model {
+    /// The simulation of [`Model::trajectory_gradient`] (every step by full Newton to
+    /// `newton.tolerance`) and, per direction, the change of every frame's node positions
+    /// along it: `[direction][frame]`, 3 n values each (m per unit of the direction; frame 0
+    /// is all zeros).
+    ///
+    /// Not differentiated (an error names them): contact, cable dashpots, steps that must be
+    /// halved to converge.
+    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
+    pub fn trajectory_sensitivity(
+        &mut self,
+        loads: &Loads,
+        dt: f64,
+        actuation: &[Vec<f64>],
+        damping: Damping,
+        initial_positions: Option<&[f64]>,
+        initial_velocities: Option<&[f64]>,
+        newton: &NewtonOptions,
+        directions: &[TrajectoryDirection],
+    ) -> Result<(RecordedPositions, Vec<Vec<Vec<f64>>>)> {
+        let steps = actuation.len();
+        if steps == 0 {
+            return Err(Error::invalid("steps", "at least one time step", 0));
+        }
+        self.check_differentiable()?;
+        let options = DynamicsOptions {
+            newton: newton.clone(),
+            method: StepMethod::Newton,
+            save_every: 1,
+        };
+        let setup = self.step_setup(loads, dt, steps, actuation, damping, &options)?;
+        let layout = {
+            let load_terms = self.terms.loads(loads);
+            ParamLayout::new(&self.terms.parameterised(&load_terms))
+        };
+        let n_free = setup.free.len();
+        let mut tangents = directions
+            .iter()
+            .map(|d| {
+                Ok(Tangent {
+                    delta: layout.flatten(&d.params)?,
+                    mass_damping: d.mass_damping,
+                    stiffness_damping: d.stiffness_damping,
+                    current: vec![0.0; n_free],
+                    previous: vec![0.0; n_free],
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        self.continuation = None;
+        let saved_tensions = self.tendon_tensions();
+        let n3 = 3 * self.mesh.n_nodes();
+        let mut record = RecordedPositions::default();
+        let mut changes: Vec<Vec<Vec<f64>>> =
+            directions.iter().map(|_| vec![vec![0.0; n3]]).collect();
+        let mut sweep = || -> Result<()> {
+            let (mut state, _) =
+                self.start_of_run(&setup, initial_positions, initial_velocities)?;
+            record.positions.push(self.node_positions(&state.z));
+            for (s, commands) in actuation.iter().enumerate() {
+                let start = state.clone();
+                let iterations = self.converged_step(&setup, &mut state, dt, s, commands)?;
+                record.iterations.push(iterations);
+                record.positions.push(self.node_positions(&state.z));
+                let tensions = self.tendon_tensions();
+                self.tangent_step(
+                    &setup,
+                    loads,
+                    &layout,
+                    dt,
+                    s,
+                    &start,
+                    &state,
+                    &tensions,
+                    &mut tangents,
+                )?;
+                // The next step's solve starts from the tensions it solved for, not the scaled ones.
+                for (tendon, &t) in self.terms.tendons.tendons.iter_mut().zip(&tensions) {
+                    tendon.tension = t;
+                }
+                for (frames, tangent) in changes.iter_mut().zip(&tangents) {
+                    let mut frame = vec![0.0; n3];
+                    for (&d, &v) in setup
+                        .free
+                        .iter()
+                        .zip(&tangent.current)
+                        .take(setup.n_displacement)
+                    {
+                        if d < n3 {
+                            frame[d] = v;
+                        }
+                    }
+                    frames.push(frame);
+                }
+            }
+            Ok(())
+        };
+        let outcome = sweep();
+        self.last_state = None;
+        self.factor_at_solution = false;
+        for (tendon, t) in self.terms.tendons.tendons.iter_mut().zip(saved_tensions) {
+            tendon.tension = t;
+        }
+        outcome?;
+        Ok((record, changes))
+    }
+
+    /// Step k of the forward sweep: every direction's `du_{k+1}` from the step's Hessian at its
+    /// end.
+    #[allow(clippy::too_many_arguments)]
+    fn tangent_step(
+        &mut self,
+        setup: &StepSetup,
+        loads: &Loads,
+        layout: &ParamLayout,
+        h: f64,
+        k: usize,
+        start: &StepState,
+        end: &StepState,
+        end_tensions: &[f64],
+        tangents: &mut [Tangent],
+    ) -> Result<()> {
+        if tangents.is_empty() {
+            return Ok(());
+        }
+        let (alpha_m, beta_k) = (setup.damping.mass, setup.damping.stiffness);
+        let scale = 1.0 + beta_k / h;
+        let (z0, z1) = (&start.z, &end.z);
+        let n_free = setup.free.len();
+        let damped_force = self.factor_step_end(setup, h, k, z1, end_tensions)?;
+        self.last_state = Some((z1.clone(), loads.clone()));
+        let active = self.active_tendons();
+        // The start force beta_K / h P F(z_k), with every tendon out of the internal force.
+        for tendon in &mut self.terms.tendons.tendons {
+            tendon.tension = 0.0;
+        }
+        let start_eval = self.assembler.evaluate(
+            &self.terms.internal(),
+            z0,
+            true,
+            (beta_k > 0.0).then_some(HessianMode::Exact),
+        );
+        let load_terms = self.terms.loads(loads);
+        let terms = self.terms.parameterised(&load_terms);
+        let density_offset = layout
+            .blocks
+            .iter()
+            .find(|b| b.0 == "density")
+            .expect("the gravity term's density block")
+            .1;
+        let n_full = z1.len();
+        for tangent in tangents.iter_mut() {
+            // dr_k/dtheta . delta: every term at the end (the elastic and spring-cable forces
+            // carry the internal scale, and their start force enters with -beta_K / h), the
+            // lumped mass through the density, and the damping coefficients.
+            let mut at_end = vec![0.0; n_full];
+            let mut at_start = vec![0.0; n_full];
+            for (i, (term, offsets)) in terms.iter().zip(&layout.term_offsets).enumerate() {
+                let internal = i == 0 || i == 3;
+                let weight = if internal { scale } else { 1.0 };
+                add_derivative_along(*term, offsets, z1, &tangent.delta, weight, &mut at_end);
+                if internal && beta_k > 0.0 {
+                    add_derivative_along(*term, offsets, z0, &tangent.delta, 1.0, &mut at_start);
+                }
+            }
+            let mut nodal_mass = vec![0.0; n_full];
+            for (e, tet) in self.mesh.tets().iter().enumerate() {
+                let change = self.terms.mass.nodal_volume(e) * tangent.delta[density_offset + e];
+                if change != 0.0 {
+                    for d in tet.iter().flat_map(|&a| (0..3).map(move |i| 3 * a + i)) {
+                        nodal_mass[d] += change;
+                    }
+                }
+            }
+            let start_stiffness = if beta_k > 0.0 {
+                self.assembler
+                    .pattern()
+                    .symmetric_matvec(&start_eval.hessian, &tangent.current)
+            } else {
+                vec![0.0; n_free]
+            };
+            let mut rhs: Vec<f64> = (0..n_free)
+                .map(|f| {
+                    let d = setup.free[f];
+                    let m = setup.mass[f];
+                    let displacement = f < setup.n_displacement;
+                    let v1 = end.velocity[f];
+                    let mut derivative = at_end[d] + tangent.mass_damping * m * v1;
+                    let mut start_force = 0.0;
+                    if displacement {
+                        let acceleration = (v1 - start.velocity[f]) / h + alpha_m * v1;
+                        derivative += nodal_mass[d] * acceleration - beta_k / h * at_start[d];
+                        start_force = start_eval.gradient[f];
+                    }
+                    derivative += tangent.stiffness_damping * (damped_force[f] - start_force) / h;
+                    let previous = (2.0 * m / (h * h) + alpha_m * m / h) * tangent.current[f]
+                        - m / (h * h) * tangent.previous[f]
+                        + if displacement {
+                            beta_k / h * start_stiffness[f]
+                        } else {
+                            0.0
+                        };
+                    previous - derivative
+                })
+                .collect();
+            self.factor.solve_in_place(&mut rhs);
+            if !active.is_empty() {
+                let multipliers =
+                    schur_solve(&active, active.iter().map(|a| dot(&a.row, &rhs)).collect())?;
+                for (a, mu) in active.iter().zip(&multipliers) {
+                    for (x, s) in rhs.iter_mut().zip(&a.solved) {
+                        *x -= mu * s;
+                    }
+                }
+            }
+            tangent.previous = std::mem::replace(&mut tangent.current, rhs);
+        }
+        Ok(())
+    }
+}
