@@ -218,11 +218,13 @@ def test_bad_arguments_name_the_parameter(params, kwargs, match):
         _run(body, params=params, **kwargs)
 
 
-def test_a_target_time_between_frames_is_refused():
+@pytest.mark.parametrize("time", [0.015, 1.7e308, -1e300])
+def test_a_target_time_off_the_frames_is_refused(time):
+    """Between frames, or so far out that time / dt overflows."""
     body = beam()
     tip = body.mesh.nodes_on_plane((0.4, 0, 0), (1, 0, 0))
     with pytest.raises(sf.ParameterError, match="not one of the frames"):
-        _run(body, [(0.015, sf.Target.nodes(tip, body.mesh.points[tip]))])
+        _run(body, [(time, sf.Target.nodes(tip, body.mesh.points[tip]))])
 
 
 def test_cable_dashpots_are_refused_by_name():

@@ -81,7 +81,9 @@ def _timed_targets(objective: Sequence[Any], mesh: Any, dt: float, steps: int) -
         t = entry[0]
         if isinstance(t, bool) or not isinstance(t, numbers.Real) or not math.isfinite(float(t)):
             raise InputError(f"objective[{i}]: expected a finite time (s), got {describe(t)}")
-        frame = round(float(t) / dt)
+        # A time far beyond the run (t / dt overflows) is out of range, not an OverflowError.
+        ratio = float(t) / dt
+        frame = round(ratio) if math.isfinite(ratio) and abs(ratio) <= steps + 1 else -1
         if not (0 <= frame <= steps and abs(frame * dt - float(t)) <= 1e-9 * max(1.0, abs(float(t)))):
             raise ParameterError(
                 f"objective[{i}]: the time {float(t):g} s is not one of the frames 0, dt, ..., {steps} dt "
