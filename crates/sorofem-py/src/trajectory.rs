@@ -34,21 +34,14 @@ pub fn trajectory_gradient<'py>(
     checkpoint_every: usize,
 ) -> PyResult<Bound<'py, PyDict>> {
     let n = model.inner.mesh().n_nodes();
-    let loads = convert::loads(py, n, gravity, forces, prescribed)?;
-    let actuation = convert::matrix("actuation", actuation, Some(model.inner.n_cables())).py(py)?;
-    let flat = |param: &str, a: Option<&Bound<'py, PyAny>>| -> PyResult<Option<Vec<f64>>> {
-        a.filter(|a| !a.is_none())
-            .map(|a| convert::points(param, a).map(|p| p.into_iter().flatten().collect()))
-            .transpose()
-            .py(py)
-    };
-    let x0 = flat("initial_positions", initial_positions)?;
-    let v0 = flat("initial_velocities", initial_velocities)?;
-    let newton = Model::solve_options(py, None, tolerance, max_iterations, None)?;
-    let damping = sorofem_core::Damping {
-        mass: mass_damping,
-        stiffness: stiffness_damping,
-    };
+    let run = Run::new(
+        py,
+        &model,
+        [gravity, forces, prescribed, actuation],
+        (mass_damping, stiffness_damping),
+        (initial_positions, initial_velocities),
+        (tolerance, max_iterations),
+    )?;
     let raised: Mutex<Option<PyErr>> = Mutex::new(None);
     let call = |record: &sorofem_core::model::trajectory::RecordedPositions| -> Option<Vec<f64>> {
         Python::attach(|py| {
@@ -69,13 +62,13 @@ pub fn trajectory_gradient<'py>(
     let inner = &mut model.inner;
     let outcome = guarded(py, || {
         inner.trajectory_gradient(
-            &loads,
+            &run.loads,
             dt,
-            &actuation,
-            damping,
-            x0.as_deref(),
-            v0.as_deref(),
-            &newton,
+            &run.actuation,
+            run.damping,
+            run.x0.as_deref(),
+            run.v0.as_deref(),
+            &run.newton,
             checkpoint_every,
             call,
         )
@@ -84,14 +77,7 @@ pub fn trajectory_gradient<'py>(
         return Err(err);
     }
     let (record, gradient) = outcome?;
-    let out = PyDict::new(py);
-    let frames = record.positions.len();
-    let positions: Vec<f64> = record.positions.into_iter().flatten().collect();
-    out.set_item(
-        "positions",
-        PyArray1::from_vec(py, positions).reshape([frames, n, 3])?,
-    )?;
-    out.set_item("iterations", record.iterations)?;
+    let out = record_dict(py, record, n)?;
     let names = model.inner.material_param_names();
     out.set_item(
         "params",
@@ -128,21 +114,14 @@ pub fn trajectory_sensitivity<'py>(
     max_iterations: Option<usize>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let n = model.inner.mesh().n_nodes();
-    let loads = convert::loads(py, n, gravity, forces, prescribed)?;
-    let actuation = convert::matrix("actuation", actuation, Some(model.inner.n_cables())).py(py)?;
-    let flat = |param: &str, a: Option<&Bound<'py, PyAny>>| -> PyResult<Option<Vec<f64>>> {
-        a.filter(|a| !a.is_none())
-            .map(|a| convert::points(param, a).map(|p| p.into_iter().flatten().collect()))
-            .transpose()
-            .py(py)
-    };
-    let x0 = flat("initial_positions", initial_positions)?;
-    let v0 = flat("initial_velocities", initial_velocities)?;
-    let newton = Model::solve_options(py, None, tolerance, max_iterations, None)?;
-    let damping = sorofem_core::Damping {
-        mass: mass_damping,
-        stiffness: stiffness_damping,
-    };
+    let run = Run::new(
+        py,
+        &model,
+        [gravity, forces, prescribed, actuation],
+        (mass_damping, stiffness_damping),
+        (initial_positions, initial_velocities),
+        (tolerance, max_iterations),
+    )?;
     let zeros = model.inner.param_zeros();
     let mut deltas = Vec::with_capacity(directions.len());
     for direction in &directions {
@@ -170,16 +149,76 @@ pub fn trajectory_sensitivity<'py>(
     let inner = &mut model.inner;
     let (record, changes) = guarded(py, || {
         inner.trajectory_sensitivity(
-            &loads,
+            &run.loads,
             dt,
-            &actuation,
-            damping,
-            x0.as_deref(),
-            v0.as_deref(),
-            &newton,
+            &run.actuation,
+            run.damping,
+            run.x0.as_deref(),
+            run.v0.as_deref(),
+            &run.newton,
             &deltas,
         )
     })?;
+    let frames = record.positions.len();
+    let out = record_dict(py, record, n)?;
+    let count = changes.len();
+    let dx: Vec<f64> = changes.into_iter().flatten().flatten().collect();
+    out.set_item(
+        "dx",
+        PyArray1::from_vec(py, dx).reshape([count, frames, n, 3])?,
+    )?;
+    Ok(out)
+}
+
+/// The arguments both entry points share, converted: loads, the actuation schedule (steps,
+/// cables), the start (flat 3 n positions and velocities, when given), Newton's settings per
+/// step and the Rayleigh damping.
+struct Run {
+    loads: sorofem_core::Loads,
+    actuation: Vec<Vec<f64>>,
+    x0: Option<Vec<f64>>,
+    v0: Option<Vec<f64>>,
+    newton: sorofem_core::SolveOptions,
+    damping: sorofem_core::Damping,
+}
+
+impl Run {
+    fn new<'py>(
+        py: Python<'py>,
+        model: &Model,
+        [gravity, forces, prescribed, actuation]: [&Bound<'py, PyAny>; 4],
+        (mass, stiffness): (f64, f64),
+        (initial_positions, initial_velocities): (
+            Option<&Bound<'py, PyAny>>,
+            Option<&Bound<'py, PyAny>>,
+        ),
+        (tolerance, max_iterations): (Option<f64>, Option<usize>),
+    ) -> PyResult<Self> {
+        let n = model.inner.mesh().n_nodes();
+        let flat = |param: &str, a: Option<&Bound<'py, PyAny>>| -> PyResult<Option<Vec<f64>>> {
+            a.filter(|a| !a.is_none())
+                .map(|a| convert::points(param, a).map(|p| p.into_iter().flatten().collect()))
+                .transpose()
+                .py(py)
+        };
+        Ok(Run {
+            loads: convert::loads(py, n, gravity, forces, prescribed)?,
+            actuation: convert::matrix("actuation", actuation, Some(model.inner.n_cables()))
+                .py(py)?,
+            x0: flat("initial_positions", initial_positions)?,
+            v0: flat("initial_velocities", initial_velocities)?,
+            newton: Model::solve_options(py, None, tolerance, max_iterations, None)?,
+            damping: sorofem_core::Damping { mass, stiffness },
+        })
+    }
+}
+
+/// {"positions" (frames, n, 3), "iterations"} of a recorded trajectory.
+fn record_dict<'py>(
+    py: Python<'py>,
+    record: sorofem_core::model::trajectory::RecordedPositions,
+    n: usize,
+) -> PyResult<Bound<'py, PyDict>> {
     let out = PyDict::new(py);
     let frames = record.positions.len();
     let positions: Vec<f64> = record.positions.into_iter().flatten().collect();
@@ -188,11 +227,5 @@ pub fn trajectory_sensitivity<'py>(
         PyArray1::from_vec(py, positions).reshape([frames, n, 3])?,
     )?;
     out.set_item("iterations", record.iterations)?;
-    let count = changes.len();
-    let dx: Vec<f64> = changes.into_iter().flatten().flatten().collect();
-    out.set_item(
-        "dx",
-        PyArray1::from_vec(py, dx).reshape([count, frames, n, 3])?,
-    )?;
     Ok(out)
 }
