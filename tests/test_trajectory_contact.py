@@ -161,7 +161,7 @@ def test_contact_with_a_floor_gradient_matches_central_differences(formulation):
     names = ["youngs_modulus", "density", "mass_damping", "stiffness_damping"]
     with pytest.warns(BarrierStiffnessWarning, match="time steps ended in contact"):
         g = sf.trajectory_gradient(body, objective, names, dt=DT, steps=STEPS, gravity=G, damping=damping,
-                                   checkpoint_every=4)
+                                   checkpoint_every=4, tolerance=TIGHT)
     assert g.balanced_contact_steps > 0
 
     def value(t):
