@@ -51,6 +51,12 @@ conditioned, profiles the misfit along the worst determined parameter (``summary
 ``profile``, ``DIR/profile.png``).
 An estimate that does not converge, or a control target that is not reachable, exits 3
 (the outputs are still written). They follow ``[output]`` ``directory``, ``summary`` and ``vtu``.
+With ``[dynamics]`` they work in time (:meth:`sorofem.Scene.estimate_dynamics`,
+:meth:`~sorofem.Scene.control_dynamics`): ``estimate`` fits the run to the ``[target]`` tracks
+(``mass_damping``, ``stiffness_damping`` and scalar material parameters), ``control`` finds the
+``[control]`` cables' schedule at ``keyframe_times`` that reaches ``[target]`` at
+``reach_time`` and holds it; both write ``DIR/summary.json`` and ``DIR/trajectory.png`` (the
+run found; ``estimate`` also ``DIR/fit.png``), no ``result.vtu`` nor history.
 
 ``sweep`` solves many variants of a scene, overriding keys by their dotted names, on a Dask
 cluster, one row per case in ``DIR/results.parquet`` (:mod:`sorofem.sweeps.cli`; needs
@@ -140,6 +146,8 @@ examples:
   sorofem run examples/scenes/dynamics.toml --out results/dynamics       # [dynamics]: a trajectory
   sorofem estimate examples/scenes/estimate.toml --out results/estimate  # fit [estimate] to [target]
   sorofem control examples/scenes/control.toml --out results/control     # cable actuations for [target]
+  sorofem estimate examples/scenes/swing_estimate.toml --out results/swing  # [dynamics]: damping from tracks
+  sorofem control examples/scenes/schedule.toml --out results/schedule   # [dynamics]: a cable schedule
   sorofem info robot.msh --scale 1e-3                                    # mesh statistics and quality
   sorofem convert robot.msh robot.vtu                                    # see 'sorofem convert --help'
   sorofem schema --out scene.schema.json                                 # for editors
