@@ -94,7 +94,6 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator, Sequence
 
-
 from ._text import plural
 from ._version import __version__
 from .cables import placement_counts, write_cables
