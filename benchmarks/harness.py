@@ -363,7 +363,8 @@ def run_log(rows: dict[str, Row]) -> str:
     out = ["| # | case | child wall time [s] | load average at case start (1, 5, 15 min) |", "|---|---|---|---|"]
     for i, (name, r) in enumerate(rows.items(), 1):
         load = r.get("load_at_start")
-        out.append(f"| {i} | {name} | {fmt(r.get('child_wall_s'))} | "
+        label = f"{name} (earlier run)" if r.get("reused") else name
+        out.append(f"| {i} | {label} | {fmt(r.get('child_wall_s'))} | "
                    f"{'-' if load is None else ', '.join(f'{x:.2f}' for x in load)} |")
     return "\n".join(out) + "\n"
 

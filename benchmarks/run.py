@@ -43,6 +43,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--only", metavar="GLOB", action="append", help="run the cases matching (repeatable)")
     parser.add_argument("--list", action="store_true", help="list the cases and exit")
     parser.add_argument("--json", metavar="PATH", help="also dump the raw rows as JSON")
+    parser.add_argument("--reuse", metavar="PATH",
+                        help="rows of the cases not run now from this --json dump of an earlier run "
+                             "(the report names them and that run's extension build)")
     parser.add_argument("--child", metavar="CASE", help=argparse.SUPPRESS)
     parser.add_argument("--workdir", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -79,11 +82,17 @@ def main(argv: list[str] | None = None) -> int:
                     f"peak RSS {row['peak_rss_mib']:.0f} MiB (child {row['child_wall_s']:.1f} s)",
                     flush=True,
                 )
+        reused = _reuse(run, Path(args.reuse)) if args.reuse else []
+        if reused:
+            earlier = sorted({run.rows[n].get("extension", "?") for n in reused})
+            info["rows from an earlier run"] = (f"{len(reused)} of {len(run.rows)} cases from `{args.reuse}` "
+                                                f"(extension {', '.join(earlier)}); the run log marks them")
         report = render(run, info, command, args.quick)
     load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
     report = report.replace("\n\n## ", f"\n| load average at end (1, 5, 15 min) | {load} |\n\n## ", 1)
     # Only the rows that time sorofem itself must share one build (the peers use it for meshes only).
-    builds = sorted({r["extension"] for n, r in run.rows.items() if n.startswith("sorofem/") and "extension" in r})
+    builds = sorted({r["extension"] for n, r in run.rows.items()
+                     if n.startswith("sorofem/") and "extension" in r and not r.get("reused")})
     if len(builds) > 1:
         warning = (f"**Warning: the extension was rebuilt during this run ({' -> '.join(builds)}); "
                    "the sorofem rows come from different builds. Run again.**")
@@ -106,6 +115,19 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         Path(args.json).write_text(json.dumps(run.rows, indent=1, default=json_default))
     return 1 if any(r.get("error") for r in run.rows.values()) else 0
+
+
+def _reuse(run: Run, path: Path) -> list[str]:
+    """Adds the rows of ``path`` (a ``--json`` dump) for the registered cases this run did not
+    run, in registration order after this run's; returns their names."""
+    try:
+        earlier = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as err:
+        raise SystemExit(f"--reuse: cannot read {path}: {err}") from err
+    names = [name for name in CASES if name not in run.rows and name in earlier]
+    for name in names:
+        run.rows[name] = {**earlier[name], "reused": True}
+    return names
 
 
 if __name__ == "__main__":

@@ -129,6 +129,11 @@ def targets(rows: dict[str, Row], array_dir: Path) -> str:
         add("1 s of hammerbot dynamics: default method time / newton (same run)", "sorofem/hammerbot-dynamics-1s",
             good and ratio(good["seconds"], newton["seconds"]), 1.0, "x")
 
+    traj = ok_row("sorofem/hammerbot-trajectory-gradient")
+    if traj:
+        add("trajectory gradient (100 steps, 5 parameters) / forward simulation, defaults (issue 18)",
+            "sorofem/hammerbot-trajectory-gradient", ratio(traj["seconds"], traj["seconds_forward"]), 2.0, "x")
+
     # Issue 18: real time in the fast mode at 20k tets, and the largest mesh that runs in real time.
     realtime = {name: r for name, r in rows.items() if in_table(name, "realtime") and ok_row(name)}
     for name, r in realtime.items():

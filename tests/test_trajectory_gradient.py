@@ -94,8 +94,11 @@ def test_the_checkpoint_interval_does_not_change_the_gradient():
     objective = tip_swing(body)
     runs = [sf.trajectory_gradient(body, objective, ["youngs_modulus", "mass_damping"], dt=DT, steps=STEPS,
                                    gravity=G, damping=(2.0, 0.0), checkpoint_every=k) for k in (1, 4, STEPS)]
+    # A recomputed segment starts from its checkpoint with no kept factorisation, so its
+    # modified-Newton iterates (not its converged states, to the tolerance 1e-10) differ from
+    # the forward pass's.
     for other in runs[1:]:
-        np.testing.assert_allclose(other.vector, runs[0].vector, rtol=1e-12)
+        np.testing.assert_allclose(other.vector, runs[0].vector, rtol=1e-9)
 
 
 @pytest.mark.parametrize("formulation", ["standard", "mixed"])

@@ -121,6 +121,8 @@ def comparison(rows: dict[str, Row], array_dir: Path) -> str:
         rel_u = None
         if u_a is not None and u_b is not None and u_a.shape == u_b.shape:
             rel_u = float(np.abs(u_a - u_b).max() / np.abs(u_a).max())
+        elif peer.get("reused") and ours.get("reused"):
+            rel_u = peer.get("rel_diff_u")  # both rows from one earlier run (run.py --reuse)
         peer["speedup"], ours["speedup_vs_skfem"] = ratio, ratio  # for --json
         peer["rel_diff_tip"], peer["rel_diff_u"] = rel_w, rel_u
         out.append(

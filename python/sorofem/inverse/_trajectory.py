@@ -1,10 +1,11 @@
 """The gradient of an objective of a whole simulated trajectory: :func:`trajectory_gradient`.
 
 The discrete adjoint of the implicit Euler steps of :func:`sorofem.simulate` (docs/theory.md,
-"Trajectory adjoint"), computed by the extension: the forward pass solves every step by full
-Newton to a tight tolerance (the adjoint is exact at converged states only), keeps every
-``checkpoint_every``-th state and recomputes the others segment by segment in the backward
-sweep, one factorisation of the step's Hessian per step.
+"Trajectory adjoint"), computed by the extension: the forward pass solves every step by
+modified Newton to a tight tolerance (the adjoint is exact at converged states only), keeps
+every state (or, for runs too long for that, every ``checkpoint_every``-th state, recomputing
+the others segment by segment in the backward sweep), one factorisation of the step's Hessian
+per step.
 """
 
 from __future__ import annotations
@@ -211,11 +212,14 @@ def trajectory_gradient(
         As for :func:`sorofem.simulate`.
     tolerance
         Newton's relative tolerance of every step (tight by default: the adjoint is exact at
-        converged states). Every step is solved by full Newton, unsplit.
+        converged states). Every step is solved by modified Newton (the factorisation kept
+        across steps, as ``method="modified"``), unsplit.
     checkpoint_every
-        Keep every this many states (default ``ceil(sqrt(steps))``): memory ``steps / k + k + 1``
-        states besides the positions the objective reads; the backward sweep recomputes the
-        states between two kept ones (none with ``1``: the fastest, ``steps + 1`` states).
+        Keep every this many states: memory ``steps / k + k + 1`` states besides the positions
+        the objective reads; the backward sweep recomputes the states between two kept ones
+        (none with ``1``: the fastest, ``steps + 1`` states). Default: ``1`` while the
+        ``steps + 1`` states (each the full DOFs and the free DOFs' velocities, float64) fit
+        512 MiB, else ``ceil(sqrt(steps))``.
 
     Returns
     -------

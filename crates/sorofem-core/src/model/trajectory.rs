@@ -24,7 +24,8 @@
 //! registry's [`crate::energy::ParamTerm`]s (at `z_{k+1}`, and at `z_k` for the start force),
 //! from the lumped mass (`density`) and from the damping coefficients.
 //!
-//! Memory: the states of every `every`-th step and the last are kept (checkpoints) and the
+//! Memory: the states of every `every`-th step and the last are kept (checkpoints; by default
+//! all of them while they fit [`STATE_VALUES_BUDGET`]) and the
 //! states inside a segment are recomputed from its checkpoint in the backward sweep, so at most
 //! `steps / every + every + 1` states of `n_full + n_free` values are held (`every ~
 //! sqrt(steps)`: about `2 sqrt(steps)` states; `every = 1` keeps every state and recomputes
@@ -37,13 +38,31 @@ mod forward;
 
 pub use forward::TrajectoryDirection;
 
-use super::dynamics::{Damping, DynamicsOptions, StepMethod, StepSetup, StepState};
+use super::dynamics::{
+    Damping, DynamicsOptions, StepMethod, StepSetup, StepState, MAX_CONTRACTION,
+};
 use super::system::FactorReuse;
 use super::{Loads, Model};
 use crate::energy::{HessianMode, TendonCommand};
 use crate::error::{check_finite, Error, Result};
 use crate::newton::NewtonOptions;
 use crate::sensitivity::{add_contraction, dot, schur_solve, ParamLayout, ParamVector};
+
+/// The states (f64 values) the backward sweep may keep before it recomputes segments from
+/// checkpoints: 64 Mi values, 512 MiB (1000 steps of the 9k-tet hammerbot are 14 Mi).
+const STATE_VALUES_BUDGET: usize = 64 << 20;
+
+/// The default interval between checkpoints of a run of `steps` steps whose states hold
+/// `values_per_state` values each: 1 (every state kept, none recomputed) while the
+/// `steps + 1` states fit [`STATE_VALUES_BUDGET`], else `ceil(sqrt(steps))` (about
+/// `2 sqrt(steps)` states held, one recomputation of every step).
+fn default_checkpoint_interval(steps: usize, values_per_state: usize) -> usize {
+    if (steps + 1).saturating_mul(values_per_state) <= STATE_VALUES_BUDGET {
+        1
+    } else {
+        ((steps as f64).sqrt().ceil() as usize).max(1)
+    }
+}
 
 /// `dJ/dtheta` of a trajectory objective.
 #[derive(Clone, Debug, Default)]
@@ -75,11 +94,11 @@ struct Checkpoint {
 
 impl Model {
     /// The gradient of an objective `J(x_0, ..., x_steps)` (its value is the caller's) along the
-    /// simulation of [`Model::simulate_with`] with these arguments, every step solved by full Newton to
+    /// simulation of [`Model::simulate_with`] with these arguments, every step solved by modified Newton to
     /// `newton.tolerance` (the adjoint is exact at converged states only). `objective` receives
     /// the node positions of every frame (3 n each, m) and returns `dJ/dx` of every frame
     /// (`(steps + 1) 3 n` values, J's unit per m), or `None` to stop (its error is the caller's).
-    /// `checkpoint_every` (0: `ceil(sqrt(steps))`) sets the memory (see the module docs).
+    /// `checkpoint_every` (0: [`default_checkpoint_interval`]) sets the memory (see the module docs).
     ///
     /// Not differentiated (an error names them): contact, cable dashpots, steps that must be
     /// halved to converge.
@@ -106,22 +125,23 @@ impl Model {
         self.check_differentiable()?;
         let options = DynamicsOptions {
             newton: newton.clone(),
-            method: StepMethod::Newton,
+            method: StepMethod::Modified,
             save_every: 1,
         };
         let setup = self.step_setup(loads, dt, steps, actuation, damping, &options)?;
-        let every = match checkpoint_every {
-            0 => ((steps as f64).sqrt().ceil() as usize).max(1),
-            k => k,
-        };
         self.continuation = None;
         let saved_tensions = self.tendon_tensions();
         let (mut state, _) = self.start_of_run(&setup, initial_positions, initial_velocities)?;
+        let every = match checkpoint_every {
+            0 => default_checkpoint_interval(steps, state.z.len() + state.velocity.len()),
+            k => k,
+        };
         let mut record = RecordedPositions {
             positions: vec![self.node_positions(&state.z)],
             iterations: Vec::with_capacity(steps),
         };
         let mut checkpoints = Vec::new();
+        let mut reuse = FactorReuse::new(MAX_CONTRACTION);
         for (s, commands) in actuation.iter().enumerate() {
             if s % every == 0 {
                 checkpoints.push(Checkpoint {
@@ -129,9 +149,9 @@ impl Model {
                     tensions: self.tendon_tensions(),
                 });
             }
-            record
-                .iterations
-                .push(self.converged_step(&setup, &mut state, dt, s, commands)?);
+            record.iterations.push(
+                self.converged_step_reusing(&setup, &mut state, dt, s, commands, &mut reuse)?,
+            );
             record.positions.push(self.node_positions(&state.z));
         }
         // The last state closes the last segment: no segment recomputes its own end.
@@ -205,7 +225,8 @@ impl Model {
         rest.iter().zip(z).map(|(x, u)| x + u).collect()
     }
 
-    /// One step solved to the tolerance, unsplit; its Newton iterations.
+    /// One step solved to the tolerance, unsplit, with a factorisation of its own; its Newton
+    /// iterations.
     fn converged_step(
         &mut self,
         setup: &StepSetup,
@@ -214,9 +235,23 @@ impl Model {
         s: usize,
         commands: &[f64],
     ) -> Result<usize> {
+        let mut reuse = FactorReuse::new(MAX_CONTRACTION);
+        self.converged_step_reusing(setup, state, dt, s, commands, &mut reuse)
+    }
+
+    /// [`Self::converged_step`] by `setup`'s method, keeping the factorisation in `reuse`
+    /// across the steps of a run (modified Newton).
+    fn converged_step_reusing(
+        &mut self,
+        setup: &StepSetup,
+        state: &mut StepState,
+        dt: f64,
+        s: usize,
+        commands: &[f64],
+        reuse: &mut FactorReuse,
+    ) -> Result<usize> {
         self.set_step_commands(commands)?;
-        let mut reuse = FactorReuse::new(0.25);
-        match self.time_step(setup, state, dt, &mut reuse, &mut Vec::new()) {
+        match self.time_step(setup, state, dt, reuse, &mut Vec::new()) {
             Ok(report) => Ok(report.iterations),
             Err(Error::NotConverged { mut report, .. }) => {
                 let message = format!(
@@ -273,8 +308,9 @@ impl Model {
                 tendon.tension = t;
             }
             let mut states = vec![(state.clone(), checkpoint.tensions.clone())];
+            let mut reuse = FactorReuse::new(MAX_CONTRACTION);
             for (s, commands) in actuation.iter().enumerate().take(last - 1).skip(first) {
-                self.converged_step(setup, &mut state, dt, s, commands)?;
+                self.converged_step_reusing(setup, &mut state, dt, s, commands, &mut reuse)?;
                 states.push((state.clone(), self.tendon_tensions()));
             }
             states.push((next.state.clone(), next.tensions.clone()));
@@ -539,4 +575,20 @@ struct Sweep {
     after_next: Vec<f64>,
     /// `beta_K / h K_F(z_{k+1}) P lambda_{k+1}`.
     start_force_term: Vec<f64>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every state is kept while the run fits the budget; beyond it, checkpoints about
+    /// sqrt(steps) apart (1000 hammerbot steps fit, a run 10x longer does not).
+    #[test]
+    fn checkpoints_are_kept_within_the_memory_budget() {
+        let hammerbot_state = 2 * 3 * 2210;
+        assert_eq!(default_checkpoint_interval(1000, hammerbot_state), 1);
+        assert_eq!(default_checkpoint_interval(10_000, hammerbot_state), 100);
+        assert_eq!(default_checkpoint_interval(STATE_VALUES_BUDGET - 1, 1), 1);
+        assert_eq!(default_checkpoint_interval(STATE_VALUES_BUDGET, 1), 8192);
+    }
 }
