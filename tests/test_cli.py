@@ -162,7 +162,7 @@ def test_version(capsys):
 def test_quality_of_regular_tet():
     import numpy as np
 
-    from sorofem.cli import tet_quality
+    from sorofem.mesh_info import tet_quality
 
     regular = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], dtype=float)
     assert tet_quality(regular, np.array([[0, 1, 2, 3]]))[0] == pytest.approx(1.0)

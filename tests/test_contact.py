@@ -147,3 +147,24 @@ def test_a_bad_scene_exits_2_naming_the_key(tmp_path, capsys, obstacle, contact,
     assert main(["run", str(scene), "--out", str(tmp_path / "out"), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert names in err and "Traceback" not in err
+
+
+def test_a_friction_relag_from_a_converged_state_is_judged_against_the_first_solves_reference():
+    """A tendon pull (no external load: the first solve's reference is its own start residual)
+    with a frictional obstacle out of reach: the friction re-lags start at the converged state,
+    whose leftover residual (round-off) must not become their reference. They took 224 extra
+    Newton iterations wandering at that round-off before the re-lags kept the first reference."""
+    mesh = sf.Mesh.box(size=(0.1, 0.02, 0.02), cells=(10, 2, 2))
+    body = sf.Body(mesh, sf.NeoHookean(youngs_modulus=66e3, poisson_ratio=0.45, density=DENSITY))
+    body.fix(mesh.nodes_on_plane((0, 0, 0), (1, 0, 0)))
+    x = np.linspace(0.0, 0.095, 6)
+    points = np.vstack([[-0.01, 0.01, 0.018], np.c_[x, np.full_like(x, 0.01), np.full_like(x, 0.018)]])
+    cable = sf.Cable(points, model="tendon", anchor_first=True)
+    body.add_cable(cable)
+    body.add_obstacle(sf.Plane((0, 0, -0.05), (0, 0, 1)), friction=0.5)
+    rest = sf.solve_static(body, tolerance=1e-10)
+    body.pull(cable, displacement=1e-3)
+    pulled = sf.solve_static(body, tolerance=1e-10, initial=rest)
+    assert pulled.report.converged and pulled.active_contacts == 0
+    assert pulled.cable_pull[0] == pytest.approx(1e-3, rel=1e-9)
+    assert pulled.report.iterations <= 6, pulled.report.residual_history

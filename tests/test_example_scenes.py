@@ -37,9 +37,12 @@ def test_generated_data_are_what_the_generator_writes(make_data, tmp_path):
     """The committed files are the generator's output (the tetrahedral finger aside: fTetWild's
     output varies from run to run; its volume is checked below)."""
     written = make_data.write_all(tmp_path, mesher=False)
-    assert {p.name for p in written} == {"beam_markers.csv", "cable_goal.npy", "finger.stl", "h_robot.stl"}
+    assert {p.name for p in written} == {"beam_markers.csv", "cable_goal.npy", "swing_tracks.csv", "finger.stl",
+                                         "h_robot.stl"}
     np.testing.assert_allclose(sf.io.read_points(tmp_path / "beam_markers.csv"), sf.io.read_points(DATA / "beam_markers.csv"),
                                rtol=1e-8, atol=1e-12)
+    np.testing.assert_allclose(np.loadtxt(tmp_path / "swing_tracks.csv", delimiter=",", skiprows=2),
+                               np.loadtxt(DATA / "swing_tracks.csv", delimiter=",", skiprows=2), rtol=1e-8, atol=1e-12)
     np.testing.assert_allclose(np.load(tmp_path / "cable_goal.npy"), np.load(DATA / "cable_goal.npy"), rtol=1e-9, atol=1e-12)
     for name in ("finger.stl", "h_robot.stl"):
         assert (tmp_path / name).read_bytes() == (DATA / name).read_bytes(), name
@@ -104,6 +107,39 @@ def test_control_scene_finds_the_generators_actuation(make_data, tmp_path):
     summary = json.loads((tmp_path / "summary.json").read_text(encoding="utf-8"))
     assert summary["reachable"] is True
     assert summary["actuation"] == [pytest.approx(make_data.CONTROL_ALPHA, abs=1e-5)]
+
+
+def test_swing_estimate_scene_recovers_the_generators_damping(make_data, tmp_path):
+    """Rayleigh damping from the noisy, partly hidden swing: each coefficient within three of its
+    standard errors of the generator's and determined to 10 %; the fit starts far off (its misfit
+    is over 10 times the noise) and ends at the noise (the residual standard deviation is the
+    0.1 mm put in, to 20 %): what is left is noise, not model error."""
+    assert main(["estimate", str(SCENES / "swing_estimate.toml"), "--out", str(tmp_path), "--quiet"]) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text(encoding="utf-8"))
+    uncertainty = summary["uncertainty"]
+    for name, truth in make_data.SWING_DAMPING.items():
+        assert abs(summary["params"][name] - truth) < 3 * uncertainty["std"][name], name
+        assert uncertainty["relative_std"][name] < 0.1, name
+    assert summary["history"][0]["rms"] > 10 * make_data.SWING_NOISE
+    assert abs(uncertainty["sigma"] / make_data.SWING_NOISE - 1) < 0.2
+
+
+def test_schedule_scene_reaches_the_goal_and_holds_it(make_data, tmp_path):
+    """The schedule brings the tip points to the goal at T and holds them (RMS distance under
+    1 mm at T and after it, at most 1/10 of the distance a plain step to the goal's command
+    swings through after T), and the command held after T is the static one that holds the goal
+    (the generator's alpha), since the beam is at rest there."""
+    assert main(["control", str(SCENES / "schedule.toml"), "--out", str(tmp_path), "--quiet"]) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text(encoding="utf-8"))
+    assert summary["reachable"] is True and max(summary["distance"], summary["swing"]) < 1e-3
+    assert summary["actuation"][-1] == [pytest.approx(make_data.CONTROL_ALPHA, abs=1e-3)]
+    scene = sf.Scene.load(SCENES / "schedule.toml")
+    d = scene.dynamics
+    step = sf.simulate(scene.body, d["dt"], d["steps"], actuation={0: make_data.CONTROL_ALPHA}, gravity=scene.gravity,
+                       damping=(d["mass_damping"], d["stiffness_damping"]), initial=scene.solve(), progress=False)
+    goal = scene.target.bind(scene.mesh)
+    reach = round(summary["reach_time"] / d["dt"])
+    assert summary["swing"] < 0.1 * max(goal.rms(x) for x in step.positions[reach:])
 
 
 def _balance(result: sf.StaticResult, gravity: np.ndarray, density: float) -> float:

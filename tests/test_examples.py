@@ -115,22 +115,27 @@ def test_example_scene_runs(scene, tmp_path):
     for command in ("estimate", "control"):
         if command in data:
             assert main([command, str(scene), "--out", str(tmp_path / command), "--quiet"]) == 0
-            for name in ("summary.json", "result.vtu", "fit.png"):
+            # With [dynamics]: a fit to motion or a schedule, whose figure is the run it found.
+            names = (("summary.json", "trajectory.png") + (("fit.png",) if command == "estimate" else ())
+                     if "dynamics" in data else ("summary.json", "result.vtu", "fit.png"))
+            for name in names:
                 assert (tmp_path / command / name).is_file(), (command, name)
 
 
 def test_every_command_has_an_example_scene():
-    """run (static and [dynamics]), estimate, control, material regions, a tetrahedral mesh
-    file, a surface to tetrahedralise and a target read from a file: each has a scene."""
+    """run (static and [dynamics]), estimate, control (also in time: tracks, keyframes), material
+    regions, a tetrahedral mesh file, a surface to tetrahedralise and a target read from a file:
+    each has a scene."""
     found: set[str] = set()
     for scene in SCENES:
         data = tomllib.loads(scene.read_text(encoding="utf-8"))
         found |= {key for key in ("dynamics", "estimate", "control", "cable") if key in data}
         found |= {f"mesh.{key}" for key in ("file", "surface", "box") if key in data["mesh"]}
         found |= {"regions"} if data["material"].get("region") else set()
-        found |= {"target.positions_file"} if "positions_file" in data.get("target", {}) else set()
+        found |= {f"target.{key}" for key in ("positions_file", "tracks_file") if key in data.get("target", {})}
+        found |= {"control.keyframe_times"} if "keyframe_times" in data.get("control", {}) else set()
     assert found >= {"dynamics", "estimate", "control", "cable", "mesh.file", "mesh.surface", "mesh.box", "regions",
-                     "target.positions_file"}, found
+                     "target.positions_file", "target.tracks_file", "control.keyframe_times"}, found
 
 
 def test_cantilever_scene_matches_example(cantilever_summary, tmp_path):

@@ -153,7 +153,7 @@ def test_target_positions_file_errors(tmp_path, content, message):
         ('positions_file = "absent.csv"', "target.positions_file", "points file not found"),
         ("", "target.positions", "missing: expected the goal of each of 'nodes'"),
         ('positions = [[0, 0, 0], [0, 0, 0]]\npositions_file = "goal.csv"', "target",
-         "expected at most one of 'positions' or 'positions_file'"),
+         "expected at most one of 'positions', 'positions_file', 'tracks' or 'tracks_file'"),
     ):
         text = TARGET_SCENE + f"\n[target]\nnodes = [0, 1]\n{extra}\n"
         with pytest.raises(sf.SceneError) as info:

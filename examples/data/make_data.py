@@ -14,6 +14,14 @@ deterministic ones and compares them with the committed files.
     Where two tip points of the same cantilever (``control.toml``), with a cable along the
     middle of its bottom, 1 cm inside, are with the cable pulled to alpha = 0.85 (``(2, 3)``
     float64, m): the goal ``sorofem control`` should reach.
+``swing_tracks.csv``
+    Four markers on the same cantilever (``swing_estimate.toml``), held straight and released
+    under gravity at t = 0, filmed at 50 Hz for 0.6 s as it swings down and back (the truth:
+    the material above, Rayleigh damping alpha_M = 2 1/s and beta_K = 5 ms, implicit Euler at
+    dt = 10 ms, every step to 1e-12), plus Gaussian noise of 0.1 mm (seed 18); the mid-span
+    marker is hidden for 0.3 s < t <= 0.4 s. One row per marker seen in a frame, columns time
+    (s), marker (its index in the scene's ``[target] points``), x, y, z (m). ``sorofem
+    estimate`` should recover both coefficients within their standard errors.
 ``finger.stl``
     The tapered silicone finger of ``examples/10_surface_to_robot.py`` (120 mm, rounded square
     section 25 -> 15 mm, 96 triangles), binary STL in millimetres.
@@ -55,6 +63,14 @@ SEED = 2024
 #: The control scene's goal: alpha of its cable, and the two tip points observed (rest, m).
 CONTROL_ALPHA = 0.85
 CONTROL_POINTS = [[0.4, 0.05, 0.05], [0.4, 0.05, 0.1]]
+#: The swing of the estimate-in-time scene: its true Rayleigh damping, run, markers (rest, m),
+#: camera (a frame every FRAME_EVERY steps), noise and the interval the mid-span marker is hidden.
+SWING_DAMPING = {"mass_damping": 2.0, "stiffness_damping": 0.005}  # 1/s, s
+SWING_DT, SWING_STEPS, SWING_FRAME_EVERY = 0.01, 60, 2  # s, -, -
+SWING_MARKERS = [[0.4, 0.05, 0.1], [0.4, 0.0, 0.05], [0.4, 0.1, 0.0], [0.2, 0.05, 0.1]]
+SWING_NOISE = 1e-4  # m
+SWING_SEED = 18
+SWING_HIDDEN = (3, 0.3, 0.4)  # marker, hidden for t in (start, end], s
 #: The H robot, mm (x: width, z: height, y: thickness).
 H_WIDTH, H_HEIGHT, H_THICKNESS = 80.0, 60.0, 20.0
 H_LEG, H_BRIDGE = 20.0, (25.0, 45.0)  # leg width; the bridge spans these heights
@@ -85,6 +101,22 @@ def cable_goal() -> np.ndarray:
     body = cantilever(sf.NeoHookean(**ESTIMATE_TRUTH), CONTROL_ALPHA)
     result = sf.solve_static(body, GRAVITY, tolerance=1e-12)
     return sf.Target.points(CONTROL_POINTS, CONTROL_POINTS).bind(body.mesh).points(result.positions)
+
+
+def swing_tracks() -> np.ndarray:
+    """Rows ``[time, marker, x, y, z]`` of the noisy, partly hidden swing (see the module
+    docstring), in time then marker order."""
+    body = cantilever(sf.NeoHookean(**ESTIMATE_TRUTH))
+    traj = sf.simulate(body, SWING_DT, SWING_STEPS, gravity=GRAVITY, damping=tuple(SWING_DAMPING.values()),
+                       tolerance=1e-12, method="newton", progress=False)
+    frames = np.arange(SWING_FRAME_EVERY, SWING_STEPS + 1, SWING_FRAME_EVERY)
+    bound = sf.Target.points(SWING_MARKERS, SWING_MARKERS).bind(body.mesh)
+    exact = np.stack([bound.points(traj.positions[k]) for k in frames])
+    noisy = exact + np.random.default_rng(SWING_SEED).normal(0.0, SWING_NOISE, exact.shape)
+    hidden, start, end = SWING_HIDDEN
+    rows = [[k * SWING_DT, m, *noisy[i, m]] for i, k in enumerate(frames) for m in range(len(SWING_MARKERS))
+            if not (m == hidden and start < k * SWING_DT <= end + 1e-12)]
+    return np.array(rows)
 
 
 def finger_surface() -> tuple[np.ndarray, np.ndarray]:
@@ -136,6 +168,12 @@ def write_all(out: Path, mesher: bool | None = None) -> list[Path]:
     written.append(path)
     path = out / "cable_goal.npy"
     np.save(path, cable_goal())
+    written.append(path)
+    path = out / "swing_tracks.csv"
+    header = ("# time [s], marker (index in [target] points), x, y, z [m]: the swing of "
+              "examples/scenes/swing_estimate.toml (examples/data/make_data.py)\ntime,marker,x,y,z\n")
+    path.write_text(header + "".join(f"{t:.2f},{int(m)},{x:.9e},{y:.9e},{z:.9e}\n" for t, m, x, y, z in swing_tracks()),
+                    encoding="utf-8")
     written.append(path)
     for name, (points, triangles) in (("finger.stl", finger_surface()), ("h_robot.stl", h_surface())):
         write_stl(out / name, points, triangles)

@@ -51,6 +51,12 @@ conditioned, profiles the misfit along the worst determined parameter (``summary
 ``profile``, ``DIR/profile.png``).
 An estimate that does not converge, or a control target that is not reachable, exits 3
 (the outputs are still written). They follow ``[output]`` ``directory``, ``summary`` and ``vtu``.
+With ``[dynamics]`` they work in time (:meth:`sorofem.Scene.estimate_dynamics`,
+:meth:`~sorofem.Scene.control_dynamics`): ``estimate`` fits the run to the ``[target]`` tracks
+(``mass_damping``, ``stiffness_damping`` and scalar material parameters), ``control`` finds the
+``[control]`` cables' schedule at ``keyframe_times`` that reaches ``[target]`` at
+``reach_time`` and holds it; both write ``DIR/summary.json`` and ``DIR/trajectory.png`` (the
+run found; ``estimate`` also ``DIR/fit.png``), no ``result.vtu`` nor history.
 
 ``sweep`` solves many variants of a scene, overriding keys by their dotted names, on a Dask
 cluster, one row per case in ``DIR/results.parquet`` (:mod:`sorofem.sweeps.cli`; needs
@@ -88,8 +94,6 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator, Sequence
 
-import numpy as np
-
 from ._text import plural
 from ._version import __version__
 from .cables import placement_counts, write_cables
@@ -97,7 +101,8 @@ from .convert import run_command as convert_command
 from .dynamics import PvdWriter
 from .errors import ConvergenceError, InputError, Interrupted, OutputError, SolverError
 from .inverse import DEFAULT_TOLERANCE, control, estimate
-from .io import RunFolder, atomic_path, json_text, read_mesh, write_result, write_text
+from .io import RunFolder, atomic_path, write_result, write_text
+from .mesh_info import run_command as info_command
 from .plot import plot_convergence, plot_fit, plot_profile, plot_rest_and_deformed, plot_trajectory
 from .progress import default as progress_default
 from .scene import Scene, schema_text
@@ -117,10 +122,9 @@ CABLE_OUTPUT_NAMES = ("cables.vtu",)
 DYNAMICS_OUTPUT_NAMES = ("trajectory.pvd", "trajectory", "summary.json", "trajectory.png")
 #: Every name `run` may write in its folder (sorofem.io.RunFolder: the stale ones are reported).
 RUN_OWNED = tuple(dict.fromkeys(OUTPUT_NAMES + CABLE_OUTPUT_NAMES + ("deformed.vtu",) + DYNAMICS_OUTPUT_NAMES))
-#: What `estimate` and `control` write (history.jsonl: estimate's, unless --history names another file).
-INVERSE_OUTPUT_NAMES = ("summary.json", "result.vtu", "fit.png", "profile.png", "history.jsonl")
-#: Radius ratio below which a tet counts as bad in `sorofem info` (1 = regular tet).
-BAD_QUALITY = 0.1
+#: What `estimate` and `control` write (history.jsonl: estimate's, unless --history names another file;
+#: trajectory.png: theirs for a scene with [dynamics], which write no result.vtu nor history).
+INVERSE_OUTPUT_NAMES = ("summary.json", "result.vtu", "fit.png", "profile.png", "history.jsonl", "trajectory.png")
 
 
 class _UsageError(Exception):
@@ -141,6 +145,8 @@ examples:
   sorofem run examples/scenes/dynamics.toml --out results/dynamics       # [dynamics]: a trajectory
   sorofem estimate examples/scenes/estimate.toml --out results/estimate  # fit [estimate] to [target]
   sorofem control examples/scenes/control.toml --out results/control     # cable actuations for [target]
+  sorofem estimate examples/scenes/swing_estimate.toml --out results/swing  # [dynamics]: damping from tracks
+  sorofem control examples/scenes/schedule.toml --out results/schedule   # [dynamics]: a cable schedule
   sorofem info robot.msh --scale 1e-3                                    # mesh statistics and quality
   sorofem convert robot.msh robot.vtu                                    # see 'sorofem convert --help'
   sorofem schema --out scene.schema.json                                 # for editors
@@ -275,7 +281,7 @@ def _dispatch(args: argparse.Namespace) -> int:
         return _schema(args)
     if args.command == "sweep":
         return sweep_cli.run_command(args)
-    return _info(args)
+    return info_command(args.mesh, args.scale, as_json=args.json)
 
 
 def _one_line(exc: BaseException) -> str:
@@ -545,19 +551,29 @@ def _run_dynamics(args: argparse.Namespace, scene: Any, run: RunFolder, base: di
 
 
 def _inverse(args: argparse.Namespace) -> int:
-    """``estimate`` / ``control``: summary.json and result.vtu in ``--out``."""
+    """``estimate`` / ``control``: summary.json and result.vtu in ``--out``; for a scene with
+    ``[dynamics]``, a fit to recorded motion / a schedule (summary.json, trajectory.png)."""
     command = args.command
     scene = Scene.load(args.scene)
     section = getattr(scene, command)
-    if scene.target is None:
+    if scene.target is None and scene.tracks is None:
         raise InputError(f"{scene.path}: '{command}' needs a [target] table")
     if section is None:
         raise InputError(f"{scene.path}: '{command}' needs an [{command}] table")
+    in_time = scene.dynamics is not None
+    if in_time and command == "estimate" and (args.history is not None or args.resume):
+        raise InputError(f"{'--resume' if args.resume else '--history'}: a fit to motion (a scene with [dynamics]) "
+                         "keeps no history file to resume; leave it out")
     out, label = _output_folder(args, scene)
-    switches = {"summary.json": scene.output["summary"], "result.vtu": scene.output["vtu"], "fit.png": scene.output["png"]}
+    if in_time:
+        switches = {"summary.json": scene.output["summary"], "fit.png": scene.output["png"] and command == "estimate",
+                    "trajectory.png": scene.output["png"]}
+    else:
+        switches = {"summary.json": scene.output["summary"], "result.vtu": scene.output["vtu"],
+                    "fit.png": scene.output["png"]}
     outputs = {name: out / name for name, on in switches.items() if on}
     history = None
-    if command == "estimate":
+    if command == "estimate" and not in_time:
         history = args.history if args.history is not None else out / "history.jsonl"
         outputs["history.jsonl"] = history
     _refuse_inputs(outputs, scene, label)
@@ -565,6 +581,10 @@ def _inverse(args: argparse.Namespace) -> int:
         raise InputError(f"--resume: no history to resume: {history} does not exist (pass --history FILE)")
     if history is not None:
         history.parent.mkdir(parents=True, exist_ok=True)
+    # Checked (and the equilibrium of initial = "static" solved) before anything is written.
+    motion = None
+    if in_time:
+        motion = scene.estimate_dynamics() if command == "estimate" else scene.control_dynamics()
     # Sensitivities are only as accurate as the equilibria: never looser than the inverse default.
     options = scene.solve_options.replace(tolerance=min(scene.solve_options.tolerance, DEFAULT_TOLERANCE))
     base = {
@@ -577,11 +597,13 @@ def _inverse(args: argparse.Namespace) -> int:
         "solver_options": scene.solve_options.to_dict(),
         "options": dict(section),
     }
+    if in_time:
+        base["dynamics"] = scene.to_dict()["dynamics"]
     run = RunFolder(out, outputs, INVERSE_OUTPUT_NAMES)
     try:
         run.start({**base, "history_file": None if history is None else str(history)})
         _warn_stale(run)
-        return _inverse_run(args, scene, section, options, history, run, base, label)
+        return _inverse_run(args, scene, section, options, history, run, base, label, motion)
     except (KeyboardInterrupt, OutputError) as exc:
         run.stopped(_stop_status(exc))
         if history is not None and isinstance(exc, KeyboardInterrupt):
@@ -592,10 +614,25 @@ def _inverse(args: argparse.Namespace) -> int:
 
 
 def _inverse_run(args: argparse.Namespace, scene: Any, section: dict[str, Any], options: Any, history: Path | None,
-                 run: RunFolder, base: dict[str, Any], label: str) -> int:
+                 run: RunFolder, base: dict[str, Any], label: str, motion: dict[str, Any] | None) -> int:
     command, outputs, out = args.command, run.outputs, run.folder
-    found = _solve_inverse(command, scene, section, options, history, args)
-    if command == "estimate":
+    found = _solve_inverse(command, scene, section, options, history, args, motion)
+    if command == "control" and motion is not None:
+        plan = found
+        summary = {**base, **plan.to_dict(), "history": plan.history, "converged": plan.reachable}
+        ok, result, fitted = plan.reachable, None, plan
+        words = ", ".join(_COMMAND_WORDS[scene.body.commands[c][0]] for c in section["cables"])
+        lines = [
+            f"{scene.path.name}: schedule of cable(s) {section['cables']} ({words}) at t = "
+            f"{', '.join(f'{t:g}' for t in plan.keyframe_times)} s:",
+            *(f"  cable {c}: {', '.join(f'{v:.6g}' for v in plan.actuation[:, j])}"
+              for j, c in enumerate(section["cables"])),
+            f"at T = {plan.reach_time:g} s: distance {plan.distance:.3e} m (rms), max {plan.max_distance:.3e} m; swing "
+            f"after T {plan.swing:.3e} m; {'reachable' if plan.reachable else 'NOT reachable'}, "
+            f"{plural(plan.simulations, 'simulation')}",
+        ]
+        failure = f"target not reachable: {plan.message}"
+    elif command == "estimate":
         fit = found
         m = fit.material
         summary = {
@@ -631,7 +668,7 @@ def _inverse_run(args: argparse.Namespace, scene: Any, section: dict[str, Any], 
     try:
         if result is not None and "result.vtu" in outputs:
             write_result(outputs["result.vtu"], result, run_id=run.run_id)
-        for name, plot in (("fit.png", plot_fit), ("profile.png", plot_profile)):
+        for name, plot in (("fit.png", plot_fit), ("profile.png", plot_profile), ("trajectory.png", _plot_run)):
             if name in outputs:
                 with atomic_path(outputs[name]) as png:
                     plot(fitted, png)
@@ -654,8 +691,24 @@ def _inverse_run(args: argparse.Namespace, scene: Any, section: dict[str, Any], 
 _COMMAND_WORDS = {"actuation": "alpha", "pull": "pull, m", "tension": "tension, N"}
 
 
+def _plot_run(found: Any, path: Path) -> None:
+    """trajectory.png of a fit to motion or a schedule: the run it found."""
+    plot_trajectory(found.trajectory, path)
+
+
 def _solve_inverse(command: str, scene: Any, section: dict[str, Any], options: Any, history: Path | None,
-                   args: argparse.Namespace) -> Any:
+                   args: argparse.Namespace, motion: dict[str, Any] | None) -> Any:
+    if motion is not None and command == "estimate":
+        return estimate(
+            scene.body, scene.tracks, section["params"], section["x0"], bounds=section["bounds"],
+            method=section["method"], regions=scene.regions or None, gravity=scene.gravity,
+            tolerance=options.tolerance, max_iterations=options.max_iterations, dynamics=motion,
+        )
+    if motion is not None:
+        return control(
+            scene.body, scene.target, cables=section["cables"], bounds=section["bounds"], gravity=scene.gravity,
+            options=options, dynamics=motion,
+        )
     if command == "estimate":
         return estimate(
             scene.body, scene.target, section["params"], section["x0"], bounds=section["bounds"],
@@ -689,74 +742,6 @@ def _schema(args: argparse.Namespace) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     write_text(out, text)
     print(f"wrote {out}")
-    return EXIT_OK
-
-
-# ---------------------------------------------------------------------------
-# info
-
-
-def tet_quality(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
-    """Radius ratio ``3 r_in / r_circ`` of each tetrahedron: 1 for a regular tet, 0 when degenerate."""
-    p = points[tets]
-    a, b, c, d = p[:, 0], p[:, 1], p[:, 2], p[:, 3]
-    volume = np.abs(np.einsum("ij,ij->i", b - a, np.cross(c - a, d - a))) / 6.0
-    area = sum(
-        0.5 * np.linalg.norm(np.cross(q - o, r - o), axis=1) for o, q, r in ((a, b, c), (a, b, d), (a, c, d), (b, c, d))
-    )
-    # Circumradius from products of opposite edge lengths (Cayley-Menger in closed form).
-    x = np.linalg.norm(a - b, axis=1) * np.linalg.norm(c - d, axis=1)
-    y = np.linalg.norm(a - c, axis=1) * np.linalg.norm(b - d, axis=1)
-    z = np.linalg.norm(a - d, axis=1) * np.linalg.norm(b - c, axis=1)
-    product = np.clip((x + y + z) * (x + y - z) * (x - y + z) * (-x + y + z), 0.0, None)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        r_in = 3.0 * volume / area
-        r_circ = np.sqrt(product) / (24.0 * volume)
-        quality = np.where(volume > 0, 3.0 * r_in / r_circ, 0.0)
-    return np.nan_to_num(quality, nan=0.0)
-
-
-def _info(args: argparse.Namespace) -> int:
-    mesh = read_mesh(args.mesh, scale=args.scale)
-    lo, hi = mesh.bounds
-    vol = mesh.volumes
-    quality = tet_quality(mesh.points, mesh.tets)
-    data = {
-        "file": str(args.mesh),
-        "n_nodes": mesh.n_nodes,
-        "n_tets": mesh.n_tets,
-        "n_boundary_faces": int(mesh.boundary_faces().shape[0]),
-        "volume": float(vol.sum()),
-        "bounds_min": lo.tolist(),
-        "bounds_max": hi.tolist(),
-        "min_tet_volume": float(vol.min()),
-        "max_tet_volume": float(vol.max()),
-        "quality_measure": "radius ratio 3 r_in / r_circ (1 = regular)",
-        "min_quality": float(quality.min()),
-        "mean_quality": float(quality.mean()),
-        "bad_tets": int(np.count_nonzero(quality < BAD_QUALITY)),
-        "bad_quality_threshold": BAD_QUALITY,
-        "reoriented_tets": int(mesh.reoriented.size),
-        "cell_tags": None if mesh.cell_tags is None else {
-            int(t): int(n) for t, n in zip(*np.unique(mesh.cell_tags, return_counts=True))
-        },
-    }
-    if args.json:
-        sys.stdout.write(json_text(data))
-        return EXIT_OK
-    fmt = lambda v: "[" + ", ".join(f"{x:.6g}" for x in v) + "]"  # noqa: E731
-    print(f"{args.mesh}")
-    print(f"  nodes            {mesh.n_nodes}")
-    print(f"  tets             {mesh.n_tets}  ({data['reoriented_tets']} reoriented)")
-    print(f"  boundary faces   {data['n_boundary_faces']}")
-    print(f"  volume           {data['volume']:.6g} m^3")
-    print(f"  bounding box     {fmt(lo)} .. {fmt(hi)} (size {fmt(hi - lo)}) m")
-    print(f"  tet volume       min {data['min_tet_volume']:.4g}, max {data['max_tet_volume']:.4g} m^3")
-    print(f"  quality          radius ratio min {data['min_quality']:.3f}, mean {data['mean_quality']:.3f} (1 = regular)")
-    print(f"  bad tets         {data['bad_tets']} with radius ratio < {BAD_QUALITY}")
-    if data["cell_tags"] is not None:
-        tags = ", ".join(f"{t}: {n}" for t, n in data["cell_tags"].items())
-        print(f"  cell tags        {tags} (tag: tets; Gmsh physical group / TetGen region)")
     return EXIT_OK
 
 

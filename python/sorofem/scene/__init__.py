@@ -118,8 +118,9 @@ Schema
 
     [target]                   # optional: What sorofem estimate / control should meet (sorofem.Target): where
                                # parts of the body should be, or the force an obstacle exerts on it; exactly one
-                               # of nodes, points, surface or contact_force; nodes and points with positions or
-                               # positions_file.
+                               # of nodes, points, surface or contact_force; nodes and points with one of
+                               # positions or positions_file (a goal), or tracks or tracks_file (a recorded
+                               # motion, with [dynamics]).
     nodes = [17, 18, 19]       # observed mesh nodes (with positions)
     # points = [[0.1, 0.01, 0.01]]   # observed marker points at rest, inside the mesh (with positions), m
     positions = [[0.1, 0, -0.01], [0.1, 0.02, -0.01], [0.1, 0.02, 0.01]]   # goal position of each node or point,
@@ -127,6 +128,12 @@ Schema
     # positions_file = "markers.csv"   # the goal positions from a file instead, relative to the scene file: .npy
                                        # (k, 3) or a .csv / .txt table with columns x, y, z
                                        # (sorofem.io.read_points)
+    # tracks = [[0.02, 0, 0.4, 0.05, 0.0986]]   # a recorded motion instead (with [dynamics]): where marker number
+                                                # `marker` (0-based, an entry of nodes or points) was at `time`, a
+                                                # frame k dt of [dynamics]; a marker may miss frames, s, -, m
+    # tracks_file = "tracks.csv"   # the recorded motion from a file instead, relative to the scene file: a .csv /
+                                   # .txt table, a header line time, marker, x, y, z (any order), then a row per
+                                   # marker seen in a frame
     # surface = "goal.obj"     # goal surface file, relative to the scene file
     # scale = 1                # coordinate scale of the surface files
     # rest = "rest.obj"        # the body's own rest surface (default: the mesh boundary)
@@ -134,20 +141,32 @@ Schema
                                                              # body, instead of positions, N
 
     [estimate]                 # optional: sorofem estimate (sorofem.estimate): fit these parameters so that the
-                               # equilibrium meets [target].
+                               # equilibrium meets [target]; with [dynamics], so that the motion of [dynamics]
+                               # meets the recorded [target] tracks.
     params = ["shear_modulus", "lame_lambda"]   # names of the parameters to fit (sorofem.inverse.PARAMETERS); a
-                                                # material one may name a region, "shear_modulus:tip"; required
-    x0 = [20e3, 200e3]         # initial values, one per parameter (an array for a field); required
+                                                # material one may name a region, "shear_modulus:tip"; with
+                                                # [dynamics] also the Rayleigh coefficients mass_damping (1/s) and
+                                                # stiffness_damping (s), scalars only; required
+    x0 = [20e3, 200e3]         # initial values, one per parameter (an array for a field; > 0 for a damping
+                               # coefficient); required
     bounds = [[1000, 1e6], [1000, 100e6]]   # one [lo, hi] per parameter
     method = "least-squares"   # optimiser
-    starts = 0                 # number of extra random starts
+    starts = 0                 # number of extra random starts (not with [dynamics])
 
     [control]                  # optional: sorofem control (sorofem.control): find cable commands (alphas, tendon
-                               # pulls or tensions) that bring [target] closest.
+                               # pulls or tensions) that bring [target] closest; with [dynamics], a schedule of
+                               # them (keyframes) that brings [target] there at reach_time and holds it to the end
+                               # of the run.
     cables = [0]               # indices of the [[cable]] entries to actuate (default: all)
     bounds = [[0.3, 1]]        # one range [lo, hi] per cable in its command's units: alpha (springs, > 0; default
                                # [0.3, 1]), pull in m (default [0, L0/4]) or tension in N (required)
-    method = "l-bfgs-b"        # optimiser
+    method = "l-bfgs-b"        # optimiser (with [dynamics]: l-bfgs-b only)
+    keyframe_times = [0.1, 0.2, 0.3, 0.4, 0.5]   # with [dynamics] (required there): the times of the schedule's
+                                                 # keyframes, increasing, within dt * steps; each cable's command
+                                                 # is piecewise linear through them from its [[cable]] command at
+                                                 # t = 0, and held after the last, s
+    reach_time = 0.5           # with [dynamics] (required there): the time T, a multiple of dt, from which
+                               # [target] should be reached and held to the end of the run, s
 
     [output]                   # optional: What sorofem run writes and where (every file but deformed.vtu is on by
                                # default); estimate and control also follow directory, summary, vtu and png.

@@ -27,10 +27,10 @@ from ._spec import Checker, quoted
 
 __all__ = ["build_mesh", "build_material", "apply_fixed", "apply_loads", "apply_cables", "apply_obstacles",
            "set_cable_command", "build_dynamics",
-           "build_output", "build_target", "build_estimate", "build_control"]
+           "build_output", "build_target", "observed_rest", "build_estimate", "build_control", "existing_file"]
 
 
-def _file(check: Checker, key: str, name: str, base: Path, what: str) -> Path:
+def existing_file(check: Checker, key: str, name: str, base: Path, what: str) -> Path:
     """``name`` resolved against the scene file's folder (checked as a path first); it must exist."""
     file = _path(check, name, key, base)
     if not file.is_file():
@@ -41,13 +41,13 @@ def _file(check: Checker, key: str, name: str, base: Path, what: str) -> Path:
 def build_mesh(check: Checker, table: dict[str, Any], base: Path) -> Mesh:
     scale = table["scale"]
     if "file" in table:
-        file = _file(check, "mesh.file", table["file"], base, "mesh file")
+        file = existing_file(check, "mesh.file", table["file"], base, "mesh file")
         try:
             mesh = read_mesh(file, scale=scale)
         except InputError as exc:
             raise check.error("mesh.file", f"could not read the mesh: {exc}") from None
     elif "surface" in table:
-        file = _file(check, "mesh.surface", table["surface"], base, "surface file")
+        file = existing_file(check, "mesh.surface", table["surface"], base, "surface file")
         if not mesher_available():
             raise check.error("mesh.surface", f"filling a surface with tetrahedra needs the optional mesher "
                               f"{MESHER}: {INSTALL_HINT}")
@@ -259,7 +259,7 @@ def apply_obstacles(
         else:
             key = f"{prefix}.mesh.file"
             table = entry["mesh"]
-            file = _file(check, key, table["file"], base, "surface file")
+            file = existing_file(check, key, table["file"], base, "surface file")
             files.append(file)
             make = lambda: Obstacle.mesh(file, table["scale"], one_sided=table["one_sided"])  # noqa: E731
         try:
@@ -418,7 +418,8 @@ def build_target(
     else:
         kind = "nodes" if "nodes" in table else "points"
         if "positions_file" in table:
-            files["positions_file"] = _file(check, "target.positions_file", table["positions_file"], base, "points file")
+            files["positions_file"] = existing_file(check, "target.positions_file", table["positions_file"], base,
+                                                    "points file")
             try:
                 positions = read_points(files["positions_file"])
             except InputError as exc:
@@ -427,17 +428,9 @@ def build_target(
             positions = np.array(table["positions"])
         else:
             raise check.error("target.positions", f"missing: expected the goal of each of '{kind}' as positions = "
-                              "[[x, y, z], ...] or positions_file = \"markers.csv\"")
-        if kind == "nodes":
-            nodes = np.array(table["nodes"], dtype=np.int64)
-            if nodes.max() >= body.mesh.n_nodes:
-                raise check.error(
-                    "target.nodes",
-                    f"node index {int(nodes.max())} out of range: the mesh has {body.mesh.n_nodes} nodes",
-                )
-            rest = nodes
-        else:
-            rest = np.array(table["points"])
+                              "[[x, y, z], ...] or positions_file = \"markers.csv\" (or, with [dynamics], a recorded "
+                              "motion as tracks or tracks_file)")
+        rest = observed_rest(check, table, body)
         if len(positions) != len(rest):
             where = "target.positions_file" if "positions_file" in table else "target.positions"
             raise check.error(
@@ -453,6 +446,17 @@ def build_target(
     except InputError as exc:
         raise check.error(key, str(exc)) from None
     return target, list(files.values())
+
+
+def observed_rest(check: Checker, table: dict[str, Any], body: Body) -> np.ndarray:
+    """The ``[target]`` nodes ``(k,)`` int64, checked to be in the mesh, or points ``(k, 3)`` (m)."""
+    if "nodes" not in table:
+        return np.array(table["points"], dtype=np.float64)
+    nodes = np.array(table["nodes"], dtype=np.int64)
+    if nodes.max() >= body.mesh.n_nodes:
+        raise check.error("target.nodes",
+                          f"node index {int(nodes.max())} out of range: the mesh has {body.mesh.n_nodes} nodes")
+    return nodes
 
 
 def _bounds(

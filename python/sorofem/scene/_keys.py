@@ -20,7 +20,7 @@ from typing import Any
 from .._validate import MAX_CABLE_DIVISIONS, MAX_STARTS, MAX_TIME_STEPS, Range
 from ..body import FORMULATIONS, PRESSURE_MASSES, VOLUMETRIC_MEASURES, Body
 from ..cables import CABLE_MODELS, OUTSIDE_MODES, Cable
-from ..inverse import parameter_names
+from ..inverse import DAMPING_PARAMETERS, parameter_names
 from ..materials import DENSITY, MODELS, NEO_HOOKEAN, MaterialModel, Parameter
 from ..mesh import Mesh
 from ..plot import COLOR_FIELDS
@@ -405,6 +405,9 @@ _DYNAMICS = Table(
     doc="Integrate in time (implicit Euler, lumped mass; density > 0) instead of a static solve.",
 )
 
+#: What [target] nodes or points may come with: a goal, or a recorded motion.
+_OBSERVED = ("positions", "positions_file", "tracks", "tracks_file")
+
 _TARGET = Table(
     {
         "nodes": Field(_NODES, "observed mesh nodes (with positions)", example=[17, 18, 19]),
@@ -415,6 +418,19 @@ _TARGET = Table(
         "positions_file": Field(
             String(), "the goal positions from a file instead, relative to the scene file: .npy (k, 3) or a .csv / "
             ".txt table with columns x, y, z (sorofem.io.read_points)", example="markers.csv", commented=True,
+        ),
+        "tracks": Field(
+            Array(Tuple((Number(Range(ge=0)), Integer(ge=0), Number(), Number(), Number()), "[time, marker, x, y, z]"),
+                  1, noun="[time, marker, x, y, z] rows"),
+            "a recorded motion instead (with [dynamics]): where marker number `marker` (0-based, an entry of nodes or "
+            "points) was at `time`, a frame k dt of [dynamics]; a marker may miss frames", "s, -, m",
+            example=[[0.02, 0, 0.4, 0.05, 0.0986]], commented=True,
+            see=("Estimate and control in time", "#estimate-and-control-in-time"),
+        ),
+        "tracks_file": Field(
+            String(), "the recorded motion from a file instead, relative to the scene file: a .csv / .txt table, a "
+            "header line time, marker, x, y, z (any order), then a row per marker seen in a frame",
+            example="tracks.csv", commented=True,
         ),
         "surface": Field(String(), "goal surface file, relative to the scene file", example="goal.obj",
                          commented=True),
@@ -442,18 +458,18 @@ _TARGET = Table(
     },
     choices=(
         Choice((
-            Group(("nodes",), ("positions", "positions_file")), Group(("points",), ("positions", "positions_file")),
+            Group(("nodes",), _OBSERVED), Group(("points",), _OBSERVED),
             Group(("surface",), ("scale", "rest")), Group(("contact_force",)),
         )),
-        Choice((Group(("positions",)), Group(("positions_file",))), required=False),
+        Choice(tuple(Group((name,)) for name in _OBSERVED), required=False),
     ),
     doc="What sorofem estimate / control should meet (sorofem.Target): where parts of the body should be, or the "
     "force an obstacle exerts on it; exactly one of nodes, points, surface or contact_force; nodes and points with "
-    "positions or positions_file.",
+    "one of positions or positions_file (a goal), or tracks or tracks_file (a recorded motion, with [dynamics]).",
 )
 
 #: Parameter names [estimate] accepts (sorofem.inverse's for every model), material ones optionally ":REGION".
-_PARAMETERS = tuple(dict.fromkeys(n for model in MODELS.values() for n in parameter_names(model)))
+_PARAMETERS = tuple(dict.fromkeys(n for model in MODELS.values() for n in parameter_names(model))) + DAMPING_PARAMETERS
 _MATERIAL_PARAMETERS = tuple(dict.fromkeys(n for model in MODELS.values() for n in model.estimable()))
 _ESTIMATE = Table(
     {
@@ -461,17 +477,21 @@ _ESTIMATE = Table(
             Array(String(_PARAMETERS, pattern=f"(?:{'|'.join(_MATERIAL_PARAMETERS)}):{_NAME}",
                          pattern_doc="a material one followed by ':REGION' (a named [[material.region]])"), 1),
             "names of the parameters to fit (sorofem.inverse.PARAMETERS); a material one may name a region, "
-            "\"shear_modulus:tip\"",
+            "\"shear_modulus:tip\"; with [dynamics] also the Rayleigh coefficients mass_damping (1/s) and "
+            "stiffness_damping (s), scalars only",
             required=True, example=["shear_modulus", "lame_lambda"],
         ),
         "x0": Field(Array(Either((Number(), Array(Number(), 1))), 1),
-                    "initial values, one per parameter (an array for a field)", required=True, example=[20e3, 0.2e6]),
+                    "initial values, one per parameter (an array for a field; > 0 for a damping coefficient)",
+                    required=True, example=[20e3, 0.2e6]),
         "bounds": Field(Array(Tuple((Number(), Number()), "[lo, hi]"), 1), "one [lo, hi] per parameter",
                         default=None, example=[[1e3, 1e6], [1e3, 1e8]]),
         "method": Field(String(("least-squares", "l-bfgs-b", "nelder-mead")), "optimiser", default="least-squares"),
-        "starts": Field(Integer(ge=0, le=MAX_STARTS), "number of extra random starts", default=0),
+        "starts": Field(Integer(ge=0, le=MAX_STARTS), "number of extra random starts (not with [dynamics])",
+                        default=0),
     },
-    doc="sorofem estimate (sorofem.estimate): fit these parameters so that the equilibrium meets [target].",
+    doc="sorofem estimate (sorofem.estimate): fit these parameters so that the equilibrium meets [target]; with "
+    "[dynamics], so that the motion of [dynamics] meets the recorded [target] tracks.",
 )
 
 _CONTROL = Table(
@@ -482,10 +502,22 @@ _CONTROL = Table(
                         "one range [lo, hi] per cable in its command's units: alpha (springs, > 0; default [0.3, 1]), "
                         "pull in m (default [0, L0/4]) or tension in N (required)", default=None,
                         example=[[0.3, 1.0]]),
-        "method": Field(String(("l-bfgs-b", "nelder-mead")), "optimiser", default="l-bfgs-b"),
+        "method": Field(String(("l-bfgs-b", "nelder-mead")), "optimiser (with [dynamics]: l-bfgs-b only)",
+                        default="l-bfgs-b"),
+        "keyframe_times": Field(
+            Array(Number(Range(ge=0)), 1), "with [dynamics] (required there): the times of the schedule's keyframes, "
+            "increasing, within dt * steps; each cable's command is piecewise linear through them from its [[cable]] "
+            "command at t = 0, and held after the last", "s", default=None, example=[0.1, 0.2, 0.3, 0.4, 0.5],
+            see=("Estimate and control in time", "#estimate-and-control-in-time"),
+        ),
+        "reach_time": Field(
+            Number(Range(gt=0)), "with [dynamics] (required there): the time T, a multiple of dt, from which [target] "
+            "should be reached and held to the end of the run", "s", default=None, example=0.5,
+        ),
     },
     doc="sorofem control (sorofem.control): find cable commands (alphas, tendon pulls or tensions) that bring "
-    "[target] closest.",
+    "[target] closest; with [dynamics], a schedule of them (keyframes) that brings [target] there at reach_time and "
+    "holds it to the end of the run.",
 )
 
 #: The files `sorofem run` writes, each switchable in [output] (defaults: all of them).

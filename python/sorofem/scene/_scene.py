@@ -38,6 +38,7 @@ from ._build import (
     set_cable_command,
 )
 from ._keys import SCENE, defaults
+from ._motion import build_tracks, check_estimate, check_schedule, control_dynamics, estimate_dynamics
 from ._spec import Checker
 
 __all__ = ["Scene", "structure_key", "PER_SOLVE_CABLE_KEYS"]
@@ -115,11 +116,16 @@ class Scene:
     #: ``[dynamics]`` with defaults filled in (``actuation``: a list of
     #: :class:`sorofem.dynamics.Keyframes` per cable, or None), or None for a static scene.
     dynamics: dict[str, Any] | None = None
-    #: ``[target]`` as a :class:`sorofem.Target`, or None.
+    #: ``[target]`` as a :class:`sorofem.Target`, or None (also when it is a recorded motion).
     target: Target | None = None
+    #: ``[target]`` tracks or tracks_file (with ``[dynamics]``): the marker tracks of
+    #: :func:`sorofem.estimate`, ``[(time, Target), ...]``, one per frame with a marker seen,
+    #: in time order; else None.
+    tracks: list[tuple[float, Target]] | None = None
     #: ``[estimate]``: ``params``, ``x0``, ``bounds``, ``method``, ``starts`` (None when absent), or None.
     estimate: dict[str, Any] | None = None
-    #: ``[control]``: ``cables`` (indices), ``bounds``, ``method``, or None.
+    #: ``[control]``: ``cables`` (indices), ``bounds``, ``method``, ``keyframe_times``,
+    #: ``reach_time`` (None without them), or None.
     control: dict[str, Any] | None = None
     #: Named ``[[material.region]]`` entries: name -> indices of the elements that have the
     #: entry's material (those no later entry overrides); the ``regions=`` of
@@ -244,13 +250,23 @@ class Scene:
             obstacle_files = apply_obstacles(check, data["obstacle"], data["contact"], body, path.parent)
         dynamics = build_dynamics(check, data["dynamics"], body) if "dynamics" in data else None
         target, target_files = None, []
+        observed = data.get("target", {})
+        motion = "tracks" in observed or "tracks_file" in observed
         if like is not None:
             target = like.target
             target_files = [f for f in like.input_files if f not in (like.path, like.mesh.source)]
-        elif "target" in data:
+        elif "target" in data and not motion:
             target, target_files = build_target(check, data["target"], body, path.parent, data["obstacle"])
+        # Tracks are checked against [dynamics], which is not part of the structure: built every time.
+        tracks, track_files = (build_tracks(check, observed, data.get("dynamics"), body, path.parent) if motion
+                               else (None, []))
         estimate = build_estimate(check, data["estimate"], regions) if "estimate" in data else None
+        if estimate is not None:
+            check_estimate(check, data["estimate"], data.get("dynamics"))
         control = build_control(check, data["control"], body) if "control" in data else None
+        if control is not None:
+            check_schedule(check, data["control"], data.get("dynamics"))
+            control.update(keyframe_times=data["control"]["keyframe_times"], reach_time=data["control"]["reach_time"])
         output = build_output(check, data["output"], formulation, path.parent)
         return cls(
             path=path,
@@ -264,12 +280,14 @@ class Scene:
             cables=cables,
             dynamics=dynamics,
             target=target,
+            tracks=tracks,
             estimate=estimate,
             control=control,
             regions=regions,
             material_region=owner,
             output=output,
-            input_files=[p for p in (path, mesh.source, *target_files, *obstacle_files) if p is not None],
+            input_files=list(dict.fromkeys(p for p in (path, mesh.source, *target_files, *track_files, *obstacle_files)
+                                           if p is not None)),
             structure=structure,
         )
 
@@ -322,6 +340,52 @@ class Scene:
             tolerance=self.solve_options.tolerance, max_iterations=self.solve_options.max_iterations,
             progress=progress, on_frames=on_frames,
         )
+
+    def estimate_dynamics(self) -> dict[str, Any]:
+        """The ``dynamics=`` of :func:`sorofem.estimate` that ``sorofem estimate`` passes for a
+        scene with ``[dynamics]``, whose target is then :attr:`tracks`: dt, steps, the cable
+        schedule, the Rayleigh coefficients (the start of those fitted, the value of the
+        others) and, with ``initial = "static"``, the equilibrium :meth:`solve` finds.
+
+        Raises
+        ------
+        SceneError
+            What a fit to motion cannot take, naming the key: no tracks, a field parameter,
+            extra starts, ``initial = "static"`` with material parameters.
+        InputError
+            The scene has no ``[dynamics]`` table or no ``[estimate]`` table.
+        """
+        if self.dynamics is None or self.estimate is None:
+            raise InputError(f"{self.path}: a fit to motion needs [dynamics] and [estimate] tables")
+        options = estimate_dynamics(self._checker(), self.dynamics, self.estimate, self.tracks)
+        return {**options, "initial": self.solve() if self.dynamics["initial"] == "static" else None}
+
+    def control_dynamics(self) -> dict[str, Any]:
+        """The ``dynamics=`` of :func:`sorofem.control` that ``sorofem control`` passes for a
+        scene with ``[dynamics]``: dt, steps, ``[control]`` keyframe_times and reach_time, the
+        Rayleigh damping and, with ``initial = "static"``, the positions of the equilibrium
+        :meth:`solve` finds.
+
+        Raises
+        ------
+        SceneError
+            What a schedule cannot take, naming the key: no keyframe_times or reach_time, a
+            method other than l-bfgs-b, a ``[dynamics]`` actuation, tracks as the target.
+        InputError
+            The scene has no ``[dynamics]`` table or no ``[control]`` table.
+        """
+        if self.dynamics is None or self.control is None:
+            raise InputError(f"{self.path}: a schedule needs [dynamics] and [control] tables")
+        options = control_dynamics(self._checker(), self.dynamics, self.control, self.tracks is not None)
+        return {**options, "initial": self.solve().positions if self.dynamics["initial"] == "static" else None}
+
+    def _checker(self) -> Checker:
+        """Errors naming keys of this scene, with their lines when the file can be read."""
+        try:
+            text = self.path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError):
+            text = ""
+        return Checker(self.path, text)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain summary of the scene's settings."""

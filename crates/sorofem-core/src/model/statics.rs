@@ -394,6 +394,7 @@ fn solve_with_friction_lags(
             load_steps: 1,
             ..options.clone()
         };
+        problem.reference_floor = report.reference_norm;
         for _ in 0..MAX_FRICTION_LAGS {
             let again = rayon::scope(|_| newton::solve(problem, z, &again_options))?;
             let done = again.iterations == 0;

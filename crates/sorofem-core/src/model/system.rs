@@ -28,6 +28,10 @@ pub(super) struct System<'a> {
     pub(super) full_load: Vec<f64>,
     load: Vec<f64>,
     load_free_norm: f64,
+    /// The least reference norm of the relative residual (N): a solve continuing from a
+    /// converged state (a friction re-lag) is measured against the first solve's reference,
+    /// not against its own leftover residual, which sits at round-off.
+    pub(super) reference_floor: f64,
     prescribed: Vec<[f64; 3]>,
     /// Inertia and damping of an implicit Euler step, when the solve is one.
     step: Option<StepTerms>,
@@ -193,6 +197,7 @@ impl<'a> System<'a> {
             full_load,
             load: Vec::new(),
             load_free_norm: 0.0,
+            reference_floor: 0.0,
             prescribed,
             step,
             pressure_iterates,
@@ -505,7 +510,7 @@ impl NewtonProblem for System<'_> {
     }
 
     fn load_norm(&self) -> f64 {
-        self.load_free_norm
+        self.load_free_norm.max(self.reference_floor)
     }
 
     /// The merit (see [`NewtonProblem::merit`]) and the gradient of the energy minus the loads; in the
