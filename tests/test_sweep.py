@@ -281,6 +281,37 @@ def test_api_result_and_markers(scene, tmp_path, client):
     assert (again.skipped, again.solved) == (2, 0)
 
 
+def test_issue_21_batches_shrink_so_that_the_workers_finish_together():
+    """Speed (issue 21): big batches first (few tasks for the scheduler), small ones last (no
+    worker idles while another finishes a long batch); every case once, one group per batch."""
+    from sorofem.sweeps._run import MAX_BATCH, _batches
+
+    groups = {0: list(range(150)), 1: list(range(150, 400))}
+    todo = set(range(400)) - {3, 160}
+    batches = _batches(groups, todo, 2)
+    sizes = [len(b) for b in batches]
+    assert sorted(i for b in batches for i in b) == sorted(todo)
+    assert all(set(b) <= set(groups[0]) or set(b) <= set(groups[1]) for b in batches)
+    assert sizes[0] == MAX_BATCH == max(sizes) and len(batches) <= 16
+    # Shrinking (but for the rest of a group) down to 1/8 of a worker's share of the sweep,
+    # 398 / (8 x 2) -> 25 cases.
+    second = [len(b) for b in batches if b[0] >= 150]
+    assert second == sorted(second, reverse=True) and second[0] == MAX_BATCH
+    assert min(sizes[:-1]) == 25 > sizes[-1]
+    assert [len(b) for b in _batches(groups, todo, 2, 64)] == [64, 64, 21, 64, 64, 64, 57]
+
+
+def test_issue_21_the_local_cluster_runs_its_workers_without_profiler(client):
+    """Speed (issue 21): the workers of `local_cluster` get its Dask settings (the profiler off,
+    slower monitors: CPU the solves need) and one thread of the core's pool each."""
+    import dask
+
+    settings = client.run(lambda: {k: dask.config.get(k) for k in sf.sweeps.LOCAL_CLUSTER_CONFIG})
+    assert list(settings.values()) == [sf.sweeps.LOCAL_CLUSTER_CONFIG] * 2
+    threads = str(max(1, len(os.sched_getaffinity(0)) // 2))
+    assert list(client.run(lambda: os.environ.get("RAYON_NUM_THREADS")).values()) == [threads] * 2
+
+
 #: SCENE's beam with its cable a tendon along the top edge, pulled 10 mm.
 TENDON_SCENE = SCENE.replace("stiffness = 1e5\nactuation = 0.9", 'model = "tendon"\npull = 0.01')
 

@@ -15,12 +15,12 @@ Examples
 """
 
 from ._cases import Cases, Key, parse_key
-from ._run import CONNECT_TIMEOUT, SweepResult, local_cluster, sweep
+from ._run import CONNECT_TIMEOUT, LOCAL_CLUSTER_CONFIG, SweepResult, local_cluster, sweep
 from ._solve import FIELDS
 from ._store import load_fields, load_sweep
 
 __all__ = ["sweep", "load_sweep", "load_fields", "SweepResult", "Cases", "Key", "parse_key", "local_cluster",
-           "FIELDS", "CONNECT_TIMEOUT"]
+           "FIELDS", "CONNECT_TIMEOUT", "LOCAL_CLUSTER_CONFIG"]
 
 # Documented (and pickled) as members of this package, whichever private module holds them.
 for _public in (sweep, load_sweep, load_fields, SweepResult, Cases, Key, parse_key, local_cluster):

@@ -14,6 +14,7 @@ import json
 import logging
 import math
 import os
+import queue
 import signal
 import threading
 import time
@@ -34,16 +35,31 @@ from ._cases import Cases, read_scene
 from ._solve import FIELDS, Batch, solve_batch, tip_node
 from ._store import Store, load_sweep, missing_extra, result_columns
 
-__all__ = ["sweep", "SweepResult", "CONNECT_TIMEOUT", "local_cluster"]
+__all__ = ["sweep", "SweepResult", "CONNECT_TIMEOUT", "local_cluster", "LOCAL_CLUSTER_CONFIG"]
 
 #: Seconds to wait for a scheduler given by address before giving up.
 CONNECT_TIMEOUT = 5.0
-#: Batches per worker the cases are cut into (load balance against per-batch overhead) ...
-BATCHES_PER_WORKER = 4
-#: ... with at most this many cases in a batch (how much an interruption can lose per worker).
+#: The batches shrink as the sweep goes on (guided self-scheduling): each holds about
+#: 1 / (SHARE x workers) of the cases left, so that the first are large (few tasks for the
+#: scheduler) and the last small (the workers finish together, none waits on a long last batch) ...
+SHARE = 2
+#: ... none smaller than the cases / (MAX_BATCHES_PER_WORKER x workers) (each task costs the
+#: scheduler a few ms) ...
+MAX_BATCHES_PER_WORKER = 8
+#: ... and none larger than this (how much an interruption can lose per worker).
 MAX_BATCH = 50
-#: Seconds between two looks for finished batches (the workers go on meanwhile).
-POLL = 0.02
+#: Dask settings of :func:`local_cluster`: each worker's statistical profiler samples the running
+#: solve every 10 ms and every Dask server (scheduler, nannies, workers) checks its event loop
+#: every 20 ms, CPU taken from the solves on the same cores. Only the dashboard's profile and
+#: system pages lose detail.
+LOCAL_CLUSTER_CONFIG = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.tick.interval": "1s",
+    "distributed.admin.system-monitor.interval": "5s",
+}
+#: Seconds between two looks for a Ctrl-C while no batch finishes (a finished batch wakes the
+#: driver at once).
+POLL = 0.1
 
 
 @dataclass
@@ -85,8 +101,9 @@ def local_cluster(workers: int | None = None) -> Any:
     """A Dask ``LocalCluster`` for sweeps: ``workers`` processes (default: one per core) of one
     thread each, and the Rust core's thread pool in each worker sized so that workers x
     threads = cores (``RAYON_NUM_THREADS``): cases run side by side rather than each solve
-    spreading over every core."""
+    spreading over every core. Dask's own monitors are slowed down (:data:`LOCAL_CLUSTER_CONFIG`)."""
     try:
+        import dask
         from dask.distributed import LocalCluster
     except ImportError as exc:
         raise missing_extra("a sweep", exc) from None
@@ -95,11 +112,13 @@ def local_cluster(workers: int | None = None) -> Any:
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise InputError(f"workers: expected an integer >= 1, got {workers!r}")
     threads = max(1, cores // int(n))
-    return LocalCluster(
-        # No fixed port: the scheduler's HTTP routes (and dashboard, if bokeh is there) take a free one.
-        n_workers=int(n), threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=":0",
-        silence_logs=logging.ERROR, env={"RAYON_NUM_THREADS": str(threads)},
-    )
+    # The workers' nannies take the configuration as it is now into the worker processes they start.
+    with dask.config.set(LOCAL_CLUSTER_CONFIG):
+        return LocalCluster(
+            # No fixed port: the scheduler's HTTP routes (and dashboard, if bokeh is there) take a free one.
+            n_workers=int(n), threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=":0",
+            silence_logs=logging.ERROR, env={"RAYON_NUM_THREADS": str(threads)},
+        )
 
 
 @contextlib.contextmanager
@@ -186,11 +205,20 @@ def _markers(markers: ArrayLike | None, probe: Scene, base: dict[str, Any]) -> n
     return points
 
 
-def _batches(groups: dict[int, list[int]], todo: set[int], size: int) -> list[list[int]]:
+def _batches(groups: dict[int, list[int]], todo: set[int], workers: int, size: int | None = None) -> list[list[int]]:
+    """The cases to solve, cut into batches of one group each, in the order they are sent: of
+    ``size`` cases, or without it shrinking from ``MAX_BATCH`` (see :data:`SHARE`)."""
+    left = len(todo)
+    smallest = max(1, math.ceil(left / (MAX_BATCHES_PER_WORKER * workers)))
     out = []
     for members in groups.values():
-        left = [i for i in members if i in todo]
-        out += [left[k:k + size] for k in range(0, len(left), size)]
+        pending = [i for i in members if i in todo]
+        k = 0
+        while k < len(pending):
+            n = size or min(MAX_BATCH, max(smallest, math.ceil(left / (SHARE * workers))))
+            out.append(pending[k:k + n])
+            k += n
+            left -= len(out[-1])
     return out
 
 
@@ -255,8 +283,9 @@ def sweep(
     scheduler
         The address of a running Dask scheduler (``tcp://HOST:PORT``) to connect to instead.
     batch_size
-        Cases sent to a worker at once (default: enough for about 4 batches per worker, at
-        most 50).
+        Cases sent to a worker at once. Default: batches that shrink as the sweep goes on,
+        each about half a worker's share of the cases left (at most 50, at least 1/8 of a
+        worker's share of the sweep), so that the workers finish together.
     force
         Replace the sweep ``out`` holds if it is another one (by default that is refused).
     progress
@@ -353,18 +382,20 @@ def sweep(
         if n_threads == 0:
             say(f"no worker is connected to the scheduler {dask.scheduler.address} yet: the cases wait for one")
         n_threads = max(n_threads, 1)
-        size = batch_size or max(1, min(MAX_BATCH, math.ceil(len(todo) / (BATCHES_PER_WORKER * n_threads))))
+        batches = _batches(groups, todo, n_threads, batch_size)
+        sizes = sorted({len(b) for b in batches})
         run = len(manifest["runs"])
         manifest["runs"].append({"started": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-                                 "cases_before": len(done), "workers": n_threads, "batch_size": size,
-                                 "scheduler": dask.scheduler.address if dask.scheduler else None})
+                                 "cases_before": len(done), "workers": n_threads, "batches": len(batches),
+                                 "batch_size": sizes[-1], "scheduler": dask.scheduler.address if dask.scheduler else None})
         store.write_manifest(manifest)
         result.workers = n_threads
         resumed = f"; resuming: {len(done)} already in {store.root}, {len(todo)} to solve" if done else ""
+        cut = f"of {sizes[0]}" if len(sizes) == 1 else f"of {sizes[-1]} down to {sizes[0]}"
         say(f"{path.name}: {table.n} cases ({keys}) in {len(groups)} group(s) sharing a model, "
-            f"{n_threads} worker(s), batches of {size}{resumed}")
-        _execute(dask, store, table, path, text, _batches(groups, todo, size), points, save, len(probe.cables),
-                 columns, run, result, progress)
+            f"{n_threads} worker(s), {len(batches)} batches {cut} cases{resumed}")
+        _execute(dask, store, table, path, text, batches, points, save, len(probe.cables), columns, run, result,
+                 progress)
     result.time = time.perf_counter() - start
     return result
 
@@ -394,30 +425,33 @@ def _execute(dask: Any, store: Store, table: Cases, path: Path, text: str, batch
              points: np.ndarray, save: tuple[str, ...], n_cables: int, columns: list[tuple[str, str]], run: int,
              result: SweepResult, progress: bool | None) -> None:
     """Submit the batches, write each as it finishes, keep the counts of ``result``."""
-    from dask.distributed import as_completed
-
     keys = tuple(k.text for k in table.keys)
     marker_points = tuple(tuple(float(v) for v in p) for p in points)
     total = sum(len(m) for m in batches)
     bar = Progress(total=total, desc="sweep", unit="cases", enabled=progress)
+    # Filled by Dask's callback thread as batches finish (failed or not); the driver sleeps on it.
+    finished: queue.SimpleQueue[Any] = queue.SimpleQueue()
     futures: dict[Any, tuple[int, list[int]]] = {}
     started = time.perf_counter()
     try:
         with _interruptible() as stop:
-            for b, members in enumerate(batches):
-                # An absolute path: a worker of another process (or machine) has its own working folder.
-                batch = Batch(str(path.resolve()), text, keys, tuple((i, table.row(i)) for i in members),
-                              marker_points, save, n_cables)
-                futures[dask.submit(solve_batch, batch, pure=False)] = (b, members)
-            finished = as_completed(list(futures), loop=dask.loop)
-            while not finished.is_empty():
+            # An absolute path: a worker of another process (or machine) has its own working folder.
+            scene_path = str(path.resolve())
+            # One map, one message to the scheduler; the batches start in this order.
+            submitted = dask.map(solve_batch, [
+                Batch(scene_path, text, keys, tuple((i, table.row(i)) for i in members), marker_points, save, n_cables)
+                for members in batches], pure=False)
+            for b, (future, members) in enumerate(zip(submitted, batches)):
+                futures[future] = (b, members)
+                future.add_done_callback(finished.put)
+            while futures:
                 if stop.is_set():
                     raise KeyboardInterrupt
-                ready = finished.next_batch(block=False)
-                if not ready:
-                    stop.wait(POLL)
+                try:
+                    future = finished.get(timeout=POLL)
+                except queue.Empty:
                     continue
-                for future in ready:
+                if future in futures:
                     _write(store, future, *futures.pop(future), keys, table, columns, run, result)
                 rate = result.solved / max(time.perf_counter() - started, 1e-9)
                 bar.set(result.solved, postfix=f"{result.failed} failed, {rate:.3g} cases/s")
