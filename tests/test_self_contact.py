@@ -3,7 +3,7 @@ its lower arm with ``set_contact(self_contact=True)`` and passes through it with
 checked, and the scene key reaches the body. In dynamics the arm thrown onto the other one bounces
 off it (momentum conserved, energy not created, no surface crossing at any step) and, damped,
 settles on it at the static equilibrium; adjoint and forward sensitivities through self-contact
-match re-solves; trajectory gradients refuse self-contact by name."""
+match re-solves (trajectory derivatives through self-contact: tests/test_trajectory_contact.py)."""
 
 from __future__ import annotations
 
@@ -236,10 +236,3 @@ def test_forward_sensitivities_through_self_contact_match_finite_differences(res
         assert fd.passed, str(fd)
     finally:
         problem.restore()
-
-
-def test_trajectory_gradients_refuse_self_contact_by_name():
-    body = clamped_body(True)
-    target = sf.Target.nodes([0], body.mesh.points[[0]])
-    with pytest.raises(sf.ParameterError, match="self-contact"):
-        sf.trajectory_gradient(body, target, ["shear_modulus"], dt=1e-3, steps=2, gravity=GRAVITY)

@@ -230,17 +230,12 @@ def test_a_target_time_off_the_frames_is_refused(time):
         _run(body, [(time, sf.Target.nodes(tip, body.mesh.points[tip]))])
 
 
-def test_cable_dashpots_are_refused_by_name():
+def test_friction_is_refused_by_name():
+    """Dashpots and frictionless contact are differentiated (tests/test_trajectory_contact.py);
+    lagged friction is not."""
     body = beam()
-    body.add_cable(sf.Cable.line((0.0, 0.05, 0.02), (1, 0, 0), 0.4, 4, stiffness=3e3, damping=0.5))
-    with pytest.raises(sf.ParameterError, match="cable damping"):
-        _run(body)
-
-
-def test_obstacles_are_refused_by_name():
-    body = beam()
-    body.add_obstacle(sf.Plane((0, 0, -0.2), (0, 0, 1)))
-    with pytest.raises(sf.ParameterError, match="obstacles"):
+    body.add_obstacle(sf.Plane((0, 0, -0.2), (0, 0, 1)), friction=0.5)
+    with pytest.raises(sf.ParameterError, match="friction"):
         _run(body)
 
 

@@ -160,10 +160,12 @@ def material_param_names(model: str, options: dict[str, Any] | None = None) -> l
 class _TrajectoryGradient(TypedDict):
     positions: _F
     iterations: list[int]
+    balanced_contact_steps: int
     params: _ParamGradient
     actuation: list[list[float]]
     mass_damping: float
     stiffness_damping: float
+    cable_damping: list[float]
 
 def trajectory_gradient(
     model: Model,
@@ -187,6 +189,7 @@ def trajectory_gradient(
 class _TrajectorySensitivity(TypedDict):
     positions: _F
     iterations: list[int]
+    balanced_contact_steps: int
     dx: _F
 
 def trajectory_sensitivity(
@@ -205,7 +208,7 @@ def trajectory_sensitivity(
     max_iterations: int | None = None,
 ) -> _TrajectorySensitivity:
     """The core's forward trajectory sensitivities: per direction (``Model.forward``'s keys,
-    ``"mass_damping"``, ``"stiffness_damping"``) the change of every frame, ``dx`` of shape
+    ``"mass_damping"``, ``"stiffness_damping"``, ``"cable_damping"`` (one per cable)) the change of every frame, ``dx`` of shape
     ``(directions, steps + 1, n, 3)``."""
 
 class SolveOptions:

@@ -12,7 +12,8 @@ use std::sync::Mutex;
 /// `objective(positions (steps + 1, n, 3)) -> d objective / d positions` as a flat float64
 /// array of `(steps + 1) 3 n` values (checked by the caller). Returns {"positions",
 /// "iterations", "params" (as `Model.adjoint`), "actuation" (steps, cables), "mass_damping",
-/// "stiffness_damping"}. An exception of the objective propagates unchanged.
+/// "stiffness_damping", "cable_damping" (cables)}. An exception of the objective propagates
+/// unchanged.
 #[pyfunction]
 #[pyo3(signature = (model, gravity, forces, prescribed, dt, actuation, objective, mass_damping = 0.0, stiffness_damping = 0.0, initial_positions = None, initial_velocities = None, tolerance = None, max_iterations = None, checkpoint_every = 0))]
 #[allow(clippy::too_many_arguments)]
@@ -86,14 +87,15 @@ pub fn trajectory_gradient<'py>(
     out.set_item("actuation", gradient.actuation)?;
     out.set_item("mass_damping", gradient.mass_damping)?;
     out.set_item("stiffness_damping", gradient.stiffness_damping)?;
+    out.set_item("cable_damping", gradient.cable_damping)?;
     Ok(out)
 }
 
 /// The trajectory of `trajectory_gradient` and its forward sensitivities (see
 /// `Model::trajectory_sensitivity` in the core): `directions` is a list of dicts with the keys
-/// of `Model.forward`'s direction and optionally "mass_damping" (1/s) and "stiffness_damping"
-/// (s). Returns {"positions" (steps + 1, n, 3), "iterations", "dx" (directions, steps + 1, n,
-/// 3)}.
+/// of `Model.forward`'s direction and optionally "mass_damping" (1/s), "stiffness_damping" (s)
+/// and "cable_damping" (N s/m, one per cable). Returns {"positions" (steps + 1, n, 3),
+/// "iterations", "dx" (directions, steps + 1, n, 3)}.
 #[pyfunction]
 #[pyo3(signature = (model, gravity, forces, prescribed, dt, actuation, directions, mass_damping = 0.0, stiffness_damping = 0.0, initial_positions = None, initial_velocities = None, tolerance = None, max_iterations = None))]
 #[allow(clippy::too_many_arguments)]
@@ -140,10 +142,18 @@ pub fn trajectory_sensitivity<'py>(
             coefficient("mass_damping")?,
             coefficient("stiffness_damping")?,
         );
+        let cable_damping = match params.get_item("cable_damping")? {
+            Some(values) => {
+                params.del_item("cable_damping")?;
+                convert::vector("cable_damping", &values, Some(model.inner.n_cables())).py(py)?
+            }
+            None => Vec::new(),
+        };
         deltas.push(sorofem_core::model::trajectory::TrajectoryDirection {
             params: convert::param_direction(&params, &zeros).py(py)?,
             mass_damping: mass,
             stiffness_damping: stiffness,
+            cable_damping,
         });
     }
     let inner = &mut model.inner;
@@ -213,7 +223,7 @@ impl Run {
     }
 }
 
-/// {"positions" (frames, n, 3), "iterations"} of a recorded trajectory.
+/// {"positions" (frames, n, 3), "iterations", "balanced_contact_steps"} of a recorded trajectory.
 fn record_dict<'py>(
     py: Python<'py>,
     record: sorofem_core::model::trajectory::RecordedPositions,
@@ -227,5 +237,6 @@ fn record_dict<'py>(
         PyArray1::from_vec(py, positions).reshape([frames, n, 3])?,
     )?;
     out.set_item("iterations", record.iterations)?;
+    out.set_item("balanced_contact_steps", record.balanced_contact_steps)?;
     Ok(out)
 }

@@ -5,13 +5,15 @@ The discrete adjoint of the implicit Euler steps of :func:`sorofem.simulate` (do
 modified Newton to a tight tolerance (the adjoint is exact at converged states only), keeps
 every state (or, for runs too long for that, every ``checkpoint_every``-th state, recomputing
 the others segment by segment in the backward sweep), one factorisation of the step's Hessian
-per step.
+per step. Cable dashpots and frictionless contact (obstacles, self-contact) are differentiated;
+friction is refused.
 """
 
 from __future__ import annotations
 
 import math
 import numbers
+import warnings
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
@@ -29,13 +31,35 @@ from ..targets import BoundTarget, Target
 from ._parameters import COMMAND_PARAMETERS, Parameters, core_sensitivities
 from ._problem import bind
 
-__all__ = ["trajectory_gradient", "TrajectoryGradientResult", "TRAJECTORY_PARAMETERS"]
+__all__ = ["trajectory_gradient", "TrajectoryGradientResult", "TRAJECTORY_PARAMETERS", "BarrierStiffnessWarning",
+           "warn_balanced_contact"]
 
 #: Names :func:`trajectory_gradient` takes besides those of :func:`sorofem.gradient` (the
-#: material's, ``density``, ``gravity``, ``cable_stiffness``): the Rayleigh coefficients, the
+#: material's, ``density``, ``gravity``, ``cable_stiffness``): the Rayleigh coefficients, each
+#: spring cable's dashpot ``cable_damping`` (N s/m, :class:`sorofem.Cable`'s ``damping``), the
 #: whole schedule, and ``"keyframes:<cable>"`` for a cable whose schedule is a
 #: :class:`sorofem.dynamics.Keyframes` (the gradient by each keyframe's value).
-TRAJECTORY_PARAMETERS = ("mass_damping", "stiffness_damping", "actuation", "keyframes:<cable>")
+TRAJECTORY_PARAMETERS = ("mass_damping", "stiffness_damping", "cable_damping", "actuation", "keyframes:<cable>")
+
+class BarrierStiffnessWarning(UserWarning):
+    """Trajectory derivatives through contact hold IPC's barrier stiffness at the value each
+    step converged with; in steps that ended in contact with a stiffness balanced inside its
+    bounds, its change with the parameters is missing, and the derivatives are approximate
+    (an error of the order of the gap's change, a fraction of ``dhat``, against the motion)."""
+
+
+def warn_balanced_contact(steps: int, total: int) -> None:
+    """A :class:`BarrierStiffnessWarning` when ``steps`` of the ``total`` steps of a run ended in
+    contact with a balanced barrier stiffness."""
+    if steps > 0:
+        warnings.warn(
+            f"{steps} of {total} time steps ended in contact with a barrier stiffness balanced inside its bounds: "
+            "the trajectory derivatives hold it fixed there, so they are approximate (a stiffer barrier, "
+            "body.set_contact(stiffness=...), or a smaller dhat makes the missing part smaller)",
+            BarrierStiffnessWarning,
+            stacklevel=3,
+        )
+
 
 #: Newton's relative tolerance of every step when none is given: the adjoint differentiates
 #: the converged step equations, so the states must satisfy them to well below the accuracy
@@ -54,18 +78,23 @@ class TrajectoryGradientResult:
     gradient
         name -> dJ/dtheta in units of J per unit of the parameter: floats for scalar
         parameters, ``(steps, n_cables)`` for ``"actuation"`` (per step, each cable's alpha,
-        pull (m) or tension (N)), ``(k,)`` for ``"keyframes:<cable>"``.
+        pull (m) or tension (N)), ``(k,)`` for ``"keyframes:<cable>"``, one per spring cable
+        (in the body's order, as ``"cable_stiffness"``) for ``"cable_damping"``.
     positions
         ``(steps + 1, n_nodes, 3)`` node positions (m) of the trajectory the gradient was taken
         along (``times[i] = i dt``).
     iterations
         Newton iterations of every step.
+    balanced_contact_steps
+        Steps that ended in contact with a barrier stiffness balanced inside its bounds, where
+        the gradient is approximate (see :class:`BarrierStiffnessWarning`); 0 without contact.
     """
 
     value: float
     gradient: dict[str, Any]
     positions: NDArray[np.float64]
     iterations: NDArray[np.int64]
+    balanced_contact_steps: int = 0
 
     @property
     def vector(self) -> NDArray[np.float64]:
@@ -166,7 +195,7 @@ def _split_names(body: Body, params: str | Sequence[str]) -> tuple[list[str], li
         if name in COMMAND_PARAMETERS:
             raise InputError(f"params: {name!r} is a command, which a trajectory schedules: use 'actuation' "
                              "(every step's value) or 'keyframes:<cable>'")
-        if name in ("mass_damping", "stiffness_damping", "actuation") or name.startswith("keyframes:"):
+        if name in ("mass_damping", "stiffness_damping", "cable_damping", "actuation") or name.startswith("keyframes:"):
             dynamic.append(name)
         else:
             static.append(name)
@@ -195,8 +224,13 @@ def trajectory_gradient(
     Parameters
     ----------
     body
-        The body at the parameter values where the gradient is wanted (no obstacles, no cable
-        dashpots: those are not differentiated through time).
+        The body at the parameter values where the gradient is wanted. Its cables' dashpots
+        and its contact (obstacles, self-contact) are differentiated through time, contact
+        without friction (an obstacle with ``friction > 0`` is refused): the barrier stiffness
+        is taken as fixed at the value each step converged with (IPC balances it at every
+        step's start; its change with the parameters is not differentiated). A step that must
+        be split to converge, or to let a moving obstacle pass, is refused (choose a smaller
+        ``dt``).
     objective
         A callable ``J(positions (steps + 1, n_nodes, 3)) -> (value, dJ/dpositions (steps + 1,
         n_nodes, 3))`` (frame i at time ``i dt``); a :class:`~sorofem.Target` (``1/2 |r|^2`` at
@@ -205,7 +239,8 @@ def trajectory_gradient(
     params
         Names of :data:`sorofem.inverse.PARAMETERS` (material, ``density``, ``gravity``,
         ``cable_stiffness``) and of :data:`TRAJECTORY_PARAMETERS`: ``"mass_damping"`` (1/s),
-        ``"stiffness_damping"`` (s), ``"actuation"`` (every step's command of every cable) and
+        ``"stiffness_damping"`` (s), ``"cable_damping"`` (N s/m, each spring cable's dashpot),
+        ``"actuation"`` (every step's command of every cable) and
         ``"keyframes:<cable>"`` (the cable's index; its schedule must be a
         :class:`~sorofem.dynamics.Keyframes`).
     dt, steps, actuation, gravity, damping, initial, initial_velocity, max_iterations
@@ -224,6 +259,12 @@ def trajectory_gradient(
     Returns
     -------
     TrajectoryGradientResult
+
+    Warns
+    -----
+    BarrierStiffnessWarning
+        Some steps ended in contact with a barrier stiffness balanced inside its bounds: the
+        gradient holds it fixed there and is approximate.
 
     Examples
     --------
@@ -257,6 +298,9 @@ def trajectory_gradient(
                                  f"with an index below {len(body.cables)}")
             c = int(key)
             keyframes[name] = (c, _keyframes_of(body, actuation, c, name))
+    springs = [c for c, (kind, _) in enumerate(body.commands) if kind == "actuation"]
+    if "cable_damping" in dynamic_names and not springs:
+        raise InputError("params: 'cable_damping' needs spring cables (a dashpot is a spring cable's); the body has none")
     _, _, rho = body.material.per_element(body.mesh.n_tets)
     if not np.all(rho > 0):
         raise ParameterError(f"density: dynamics needs a mass, density > 0 in every tet; got {float(rho.min())} kg/m^3", "density")
@@ -299,6 +343,8 @@ def trajectory_gradient(
             gradient[name] = static_grad[name]
         elif name in ("mass_damping", "stiffness_damping"):
             gradient[name] = float(out[name])
+        elif name == "cable_damping":
+            gradient[name] = np.asarray(out["cable_damping"], dtype=np.float64)[springs]
         elif name == "actuation":
             gradient[name] = per_step.copy()
         else:
@@ -307,4 +353,7 @@ def trajectory_gradient(
             hats = np.stack([np.interp(times, frames.times, np.eye(frames.values.size)[j])
                              for j in range(frames.values.size)])
             gradient[name] = hats @ per_step[:, c]
-    return TrajectoryGradientResult(values[-1], gradient, np.asarray(out["positions"]), np.asarray(out["iterations"]))
+    balanced = int(out["balanced_contact_steps"])
+    warn_balanced_contact(balanced, steps)
+    return TrajectoryGradientResult(values[-1], gradient, np.asarray(out["positions"]), np.asarray(out["iterations"]),
+                                    balanced)

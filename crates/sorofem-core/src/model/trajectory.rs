@@ -6,20 +6,25 @@
 //!
 //! ```text
 //! r_k = M (u_{k+1} - u_k - h v_k) / h^2 + alpha_M M (u_{k+1} - u_k) / h
-//!     + s F(z_{k+1}) + T(z_{k+1}) - f - beta_K / h P F(z_k) = 0,     v_k = (u_k - u_{k-1}) / h
+//!     + s F(z_{k+1}) + T(z_{k+1}) + D_k + kappa_k grad B(z_{k+1}) - f - beta_K / h P F(z_k) = 0,
+//!                                                                     v_k = (u_k - u_{k-1}) / h
 //! ```
 //!
 //! with `s = 1 + beta_K / h`, F the elastic and spring-cable force (N), T the tendons' force,
-//! f the loads and P the projection on the displacement rows. For `J = sum_k phi_k(x_k)` the
-//! adjoint states `lambda_k` (one per step, free DOFs) solve, from the last step back,
+//! D_k the cables' dashpots (`dashpot`: they depend on the step's start too), B the contact
+//! barrier (frictionless; at the step's end only, its stiffness `kappa_k` held at the value the
+//! step converged with), f the loads and P the projection on the displacement rows. For
+//! `J = sum_k phi_k(x_k)` the adjoint states `lambda_k` (one per step, free DOFs) solve, from
+//! the last step back,
 //!
 //! ```text
 //! H_k lambda_k = dphi_{k+1}/du + (2 M / h^2 + alpha_M M / h) lambda_{k+1} - M / h^2 lambda_{k+2}
-//!              + beta_K / h K_F(z_{k+1}) P lambda_{k+1}
+//!              + beta_K / h K_F(z_{k+1}) P lambda_{k+1} - (dD_{k+1}/du_{k+1})^T lambda_{k+1}
 //! ```
 //!
-//! (`H_k = dr_k/du_{k+1}`, the step's own Hessian at its converged end; taut
-//! displacement-controlled tendons border it as in [`crate::sensitivity`]), and
+//! (`H_k = dr_k/du_{k+1}`, the step's own Hessian at its converged end, the dashpots' and the
+//! barrier's exact Hessians in it; taut displacement-controlled tendons border it as in
+//! [`crate::sensitivity`]), and
 //! `dJ/dtheta = -sum_k lambda_k . dr_k/dtheta`, whose parameter derivatives come from the
 //! registry's [`crate::energy::ParamTerm`]s (at `z_{k+1}`, and at `z_k` for the start force),
 //! from the lumped mass (`density`) and from the damping coefficients.
@@ -34,15 +39,19 @@
 //! [`Model::trajectory_sensitivity`] (in `forward`) differentiates the same steps forwards:
 //! the change of every frame along given parameter directions (a Jacobian for least squares).
 
+mod dashpot;
 mod forward;
 
 pub use forward::TrajectoryDirection;
 
+use self::dashpot::StepDashpots;
 use super::dynamics::{
     Damping, DynamicsOptions, StepMethod, StepSetup, StepState, MAX_CONTRACTION,
 };
 use super::system::FactorReuse;
 use super::{Loads, Model};
+use crate::cables::CableSlot;
+use crate::contact::ccd::DEFAULT_MIN_SEPARATION;
 use crate::energy::{HessianMode, TendonCommand};
 use crate::error::{check_finite, Error, Result};
 use crate::newton::NewtonOptions;
@@ -75,6 +84,8 @@ pub struct TrajectoryGradient {
     /// `dJ/d alpha_M` (per 1/s) and `dJ/d beta_K` (per s).
     pub mass_damping: f64,
     pub stiffness_damping: f64,
+    /// `dJ/dc` of every cable's dashpot coefficient (per N s/m; 0 for tendons, which have none).
+    pub cable_damping: Vec<f64>,
 }
 
 /// A run's node positions (m, 3 n per frame, the initial one first) and Newton iterations
@@ -83,6 +94,10 @@ pub struct TrajectoryGradient {
 pub struct RecordedPositions {
     pub positions: Vec<Vec<f64>>,
     pub iterations: Vec<usize>,
+    /// Steps that ended in contact with a barrier stiffness IPC balanced strictly inside its
+    /// bounds: the derivatives hold it at that value, so they miss its change with the
+    /// parameters there (at a bound, or without contact at the step's end, nothing is missed).
+    pub balanced_contact_steps: usize,
 }
 
 /// The state at the start of a step and the tendons' tensions there.
@@ -90,6 +105,13 @@ pub struct RecordedPositions {
 struct Checkpoint {
     state: StepState,
     tensions: Vec<f64>,
+}
+
+/// What a step's derivatives need of its converged end besides the state: the tendons' tensions
+/// and the barrier stiffness the step converged with (J/m^4; 0 without contact).
+struct StepEnd<'a> {
+    tensions: &'a [f64],
+    barrier_stiffness: f64,
 }
 
 impl Model {
@@ -100,8 +122,14 @@ impl Model {
     /// (`(steps + 1) 3 n` values, J's unit per m), or `None` to stop (its error is the caller's).
     /// `checkpoint_every` (0: [`default_checkpoint_interval`]) sets the memory (see the module docs).
     ///
-    /// Not differentiated (an error names them): contact, cable dashpots, steps that must be
-    /// halved to converge.
+    /// Contact (obstacles, self-contact) is differentiated without friction: the barrier
+    /// depends on the step's end only, its stiffness taken as fixed at the value each step
+    /// converged with (IPC's stiffness is balanced at every step's start and may double within
+    /// it; its change with the parameters is not differentiated). Spring cables' dashpots are
+    /// differentiated, their coefficients among the parameters.
+    ///
+    /// Not differentiated (an error names them): friction, steps that must be halved to
+    /// converge (or to let a moving obstacle pass).
     #[allow(clippy::too_many_arguments)]
     pub fn trajectory_gradient<F>(
         &mut self,
@@ -139,8 +167,10 @@ impl Model {
         let mut record = RecordedPositions {
             positions: vec![self.node_positions(&state.z)],
             iterations: Vec::with_capacity(steps),
+            balanced_contact_steps: 0,
         };
         let mut checkpoints = Vec::new();
+        let mut barrier_stiffness = Vec::with_capacity(steps);
         let mut reuse = FactorReuse::new(MAX_CONTRACTION);
         for (s, commands) in actuation.iter().enumerate() {
             if s % every == 0 {
@@ -153,6 +183,8 @@ impl Model {
                 self.converged_step_reusing(&setup, &mut state, dt, s, commands, &mut reuse)?,
             );
             record.positions.push(self.node_positions(&state.z));
+            barrier_stiffness.push(self.barrier_stiffness());
+            record.balanced_contact_steps += usize::from(self.balanced_in_contact(&state.z));
         }
         // The last state closes the last segment: no segment recomputes its own end.
         checkpoints.push(Checkpoint {
@@ -176,6 +208,7 @@ impl Model {
             dt,
             actuation,
             &checkpoints,
+            &barrier_stiffness,
             every,
             &d_positions,
         );
@@ -187,28 +220,54 @@ impl Model {
         Ok((record, gradient?))
     }
 
+    /// Friction is lagged at every step's start (its force depends on the start through the
+    /// lagged normal forces and slip basis, and is not the gradient of an energy of the end):
+    /// its derivatives are not implemented, so a body with friction is refused.
     fn check_differentiable(&self) -> Result<()> {
-        if self.terms.contact.is_some() {
-            return Err(Error::invalid(
-                "obstacles",
-                "a body without obstacles or self-contact (trajectory gradients through contact are not implemented)",
-                "a body with contact",
-            ));
-        }
-        if let Some(c) = self
+        if self
             .terms
-            .cables
-            .cables
-            .iter()
-            .position(|c| c.damping > 0.0)
+            .contact
+            .as_ref()
+            .is_some_and(|c| c.has_friction())
         {
             return Err(Error::invalid(
-                "cable damping",
-                "cables without dashpots (trajectory gradients through cable damping are not implemented)",
-                format!("spring cable {c} with damping {}", self.terms.cables.cables[c].damping),
+                "friction",
+                "frictionless contact (trajectory gradients through lagged friction are not implemented)",
+                "an obstacle with friction > 0",
             ));
         }
         Ok(())
+    }
+
+    /// The barrier stiffness of the last step (J/m^4; 0 without contact).
+    fn barrier_stiffness(&self) -> f64 {
+        self.terms.contact.as_ref().map_or(0.0, |c| c.stiffness())
+    }
+
+    /// Whether the barrier stiffness lies strictly inside its bounds with some stencil within
+    /// `dhat` at the full DOF vector `z` (see [`RecordedPositions::balanced_contact_steps`]).
+    fn balanced_in_contact(&self, z: &[f64]) -> bool {
+        let Some(contact) = &self.terms.contact else {
+            return false;
+        };
+        let bounds = contact.stiffness_bounds();
+        let kappa = contact.stiffness();
+        if !(kappa > bounds.min && kappa < bounds.max) {
+            return false;
+        }
+        let forces = contact.forces(z);
+        forces.self_active + forces.active.iter().sum::<usize>() > 0
+    }
+
+    /// Each spring cable's index among all the model's cables.
+    fn spring_cable_indices(&self) -> Vec<usize> {
+        let mut out = vec![0; self.terms.cables.cables.len()];
+        for (c, slot) in self.terms.slots.iter().enumerate() {
+            if let CableSlot::Springs(i) = slot {
+                out[*i] = c;
+            }
+        }
+        out
     }
 
     fn tendon_tensions(&self) -> Vec<f64> {
@@ -251,6 +310,19 @@ impl Model {
         reuse: &mut FactorReuse,
     ) -> Result<usize> {
         self.set_step_commands(commands)?;
+        // The obstacles move to where they are at the step's end, as in `Model::integrate`;
+        // a motion that would touch the body would split the step there.
+        if let Some(contact) = &mut self.terms.contact {
+            let end = (s + 1) as f64 * dt;
+            if contact.obstacle_motion_bound(&state.z, end, DEFAULT_MIN_SEPARATION) < 1.0 {
+                return Err(Error::invalid(
+                    "dt",
+                    "a time step over which no obstacle runs into the body (a trajectory gradient does not split steps)",
+                    format!("dt = {dt:.3e} s: in time step {s} (t = {:.4} s) an obstacle would touch the body", s as f64 * dt),
+                ));
+            }
+            contact.set_time(end);
+        }
         match self.time_step(setup, state, dt, reuse, &mut Vec::new()) {
             Ok(report) => Ok(report.iterations),
             Err(Error::NotConverged { mut report, .. }) => {
@@ -275,6 +347,7 @@ impl Model {
         dt: f64,
         actuation: &[Vec<f64>],
         checkpoints: &[Checkpoint],
+        barrier_stiffness: &[f64],
         every: usize,
         d_positions: &[f64],
     ) -> Result<TrajectoryGradient> {
@@ -289,6 +362,7 @@ impl Model {
             actuation: vec![vec![0.0; self.n_cables()]; steps],
             mass_damping: 0.0,
             stiffness_damping: 0.0,
+            cable_damping: vec![0.0; self.n_cables()],
             next: vec![0.0; n_free],
             after_next: vec![0.0; n_free],
             start_force_term: vec![0.0; n_free],
@@ -318,6 +392,10 @@ impl Model {
                 let (start, _) = &states[k - first];
                 let (end, tensions) = &states[k + 1 - first];
                 let frame = &d_positions[(k + 1) * 3 * self.mesh.n_nodes()..];
+                let step_end = StepEnd {
+                    tensions,
+                    barrier_stiffness: barrier_stiffness[k],
+                };
                 self.adjoint_step(
                     setup,
                     loads,
@@ -327,7 +405,7 @@ impl Model {
                     &actuation[k],
                     start,
                     end,
-                    tensions,
+                    &step_end,
                     frame,
                     &mut sweep,
                 )?;
@@ -338,35 +416,48 @@ impl Model {
             actuation: sweep.actuation,
             mass_damping: sweep.mass_damping,
             stiffness_damping: sweep.stiffness_damping,
+            cable_damping: sweep.cable_damping,
         })
     }
 
-    /// Factors step k's Hessian `H_k = dr_k/du_{k+1}` at its converged end `z1` (the tendons as
-    /// the step's solve had them there) and returns the damped internal force `F(z1)` that
-    /// beta_K scales (free DOFs, N; the tendons' force out). The tendons keep their tensions
-    /// divided by the internal scale `1 + beta_K / h`.
-    pub(super) fn factor_step_end(
+    /// Factors step k's Hessian `H_k = dr_k/du_{k+1}` at its converged end `z1` (from `z0`; the
+    /// tendons as the step's solve had them there, the cables' dashpots on, the contact
+    /// barrier's exact Hessian with the obstacles where they are at the step's end and the
+    /// stiffness the step converged with) and returns the damped internal force `F(z1)` that
+    /// beta_K scales (free DOFs, N; the tendons' force and the dashpots' out) and the step's
+    /// dashpots. The tendons keep their tensions divided by the internal scale `1 + beta_K / h`.
+    fn factor_step_end(
         &mut self,
         setup: &StepSetup,
         h: f64,
         k: usize,
-        z1: &[f64],
-        end_tensions: &[f64],
-    ) -> Result<Vec<f64>> {
+        (z0, z1): (&[f64], &[f64]),
+        end: &StepEnd,
+    ) -> Result<(Vec<f64>, StepDashpots)> {
         let (alpha_m, beta_k) = (setup.damping.mass, setup.damping.stiffness);
         let scale = 1.0 + beta_k / h;
         // The tendons as the step's solve had them at its end, their tensions (multipliers or
         // commands) divided by the internal scale: their force is the motor's, not damped.
-        for (tendon, &t) in self.terms.tendons.tendons.iter_mut().zip(end_tensions) {
+        for (tendon, &t) in self.terms.tendons.tendons.iter_mut().zip(end.tensions) {
             tendon.tension = match tendon.command {
                 TendonCommand::Pull(_) => t / scale,
                 TendonCommand::Tension(command) => command / scale,
             };
         }
+        if let Some(contact) = &mut self.terms.contact {
+            contact.set_time((k + 1) as f64 * h);
+            contact.set_stiffness(end.barrier_stiffness);
+        }
+        self.cover_self_contact(z1)?;
+        // The dashpots as the step's solve had them (over h + beta_K: see `Model::time_step`).
+        self.terms.cables.begin_step(h + beta_k, z0);
         let mut eval =
             self.assembler
                 .evaluate(&self.terms.internal(), z1, true, Some(HessianMode::Exact));
+        self.terms.cables.end_step();
         eval.hessian.iter_mut().for_each(|v| *v *= scale);
+        // Contact after the scaling: Rayleigh damping is the body's, not the barrier's.
+        self.add_contact_hessian(z1, &mut eval.hessian, HessianMode::Exact);
         // The diagonal is each column's first entry of the lower pattern.
         let col_ptr = &self.assembler.pattern().col_ptr;
         for (f, &m) in setup.mass.iter().enumerate() {
@@ -380,16 +471,20 @@ impl Model {
                 message: format!("the Hessian of time step {k} is singular at its end: the trajectory gradient is undefined there"),
             });
         }
-        // The damped internal force at the end (what beta_K scales): the tendons' out.
+        // The damped internal force at the end (what beta_K scales): the tendons' and the
+        // dashpots' out (the dashpots' force c dL/dt does not change with beta_K).
+        let dashpots =
+            StepDashpots::new(&self.terms.cables, &self.spring_cable_indices(), h, z0, z1);
         let mut damped_force = eval.gradient;
-        let mut tendon_force = vec![0.0; z1.len()];
+        let mut other_force = vec![0.0; z1.len()];
         for tendon in &self.terms.tendons.tendons {
-            tendon.add_length_gradient(z1, tendon.tension, &mut tendon_force);
+            tendon.add_length_gradient(z1, tendon.tension, &mut other_force);
         }
+        dashpots.add_force(1.0 / scale, &mut other_force);
         for (g, &d) in damped_force.iter_mut().zip(&setup.free) {
-            *g -= tendon_force[d];
+            *g -= other_force[d];
         }
-        Ok(damped_force)
+        Ok((damped_force, dashpots))
     }
 
     /// Step k of the adjoint sweep: `lambda_k` from the step's Hessian at its end, then its
@@ -405,7 +500,7 @@ impl Model {
         commands: &[f64],
         start: &StepState,
         end: &StepState,
-        end_tensions: &[f64],
+        step_end: &StepEnd,
         d_frame: &[f64],
         sweep: &mut Sweep,
     ) -> Result<()> {
@@ -415,7 +510,7 @@ impl Model {
         let scale = 1.0 + beta_k / h;
         let (z0, z1) = (&start.z, &end.z);
         let n_free = setup.free.len();
-        let damped_force = self.factor_step_end(setup, h, k, z1, end_tensions)?;
+        let (damped_force, dashpots) = self.factor_step_end(setup, h, k, (z0, z1), step_end)?;
 
         let mut lambda: Vec<f64> = (0..n_free)
             .map(|f| {
@@ -480,6 +575,16 @@ impl Model {
         for (f, &d) in setup.free.iter().enumerate() {
             at_end[d] = -lambda[f];
             at_start[d] = beta_k / h * projected[f];
+        }
+        if !dashpots.is_empty() {
+            // at_end is -lambda: the coupling to the start enters lambda_{k-1}'s right-hand
+            // side as +c / h dL/dz(z_k) (dL/dz(z_{k+1}) . lambda_k).
+            let mut coupling = vec![0.0; z1.len()];
+            dashpots.add_start_transpose(&at_end, &mut coupling);
+            for (term, &d) in sweep.start_force_term.iter_mut().zip(&setup.free) {
+                *term -= coupling[d];
+            }
+            dashpots.add_damping_contraction(h, &at_end, &mut sweep.cable_damping);
         }
         let load_terms = self.terms.loads(loads);
         let terms = self.terms.parameterised(&load_terms);
@@ -570,10 +675,12 @@ struct Sweep {
     actuation: Vec<Vec<f64>>,
     mass_damping: f64,
     stiffness_damping: f64,
+    cable_damping: Vec<f64>,
     /// `lambda_{k+1}` and `lambda_{k+2}` (free DOFs).
     next: Vec<f64>,
     after_next: Vec<f64>,
-    /// `beta_K / h K_F(z_{k+1}) P lambda_{k+1}`.
+    /// `beta_K / h K_F(z_{k+1}) P lambda_{k+1}` and the dashpots' `c / h dL/dz(z_{k+1})
+    /// (dL/dz(z_{k+2}) . lambda_{k+1})`.
     start_force_term: Vec<f64>,
 }
 

@@ -5,16 +5,18 @@
 //!
 //! ```text
 //! H_k du_{k+1} = (2 M / h^2 + alpha_M M / h) du_k - M / h^2 du_{k-1}
-//!              + beta_K / h P K_F(z_k) du_k - dr_k/dtheta . delta,        du_0 = du_{-1} = 0
+//!              + beta_K / h P K_F(z_k) du_k - dD_k/du_k du_k - dr_k/dtheta . delta,
+//!                                                                 du_0 = du_{-1} = 0
 //! ```
 //!
-//! with `H_k` the step's own Hessian at its converged end (taut displacement-controlled tendons
-//! bordering it, their pulls held, as in [`crate::sensitivity`]) and `K_F` the Hessian of the
-//! damped internal force. The initial state is data: it does not move with the parameters.
+//! with `H_k` the step's own Hessian at its converged end (the dashpots' and the contact
+//! barrier's in it; taut displacement-controlled tendons bordering it, their pulls held, as in
+//! [`crate::sensitivity`]), `K_F` the Hessian of the damped internal force and `D_k` the
+//! dashpots' force (`dashpot`). The initial state is data: it does not move with the parameters.
 //! Cost: one extra factorisation per step and one solve per direction and step; memory: the
 //! positions' change of every frame and direction (`directions (steps + 1) 3 n` values).
 
-use super::RecordedPositions;
+use super::{RecordedPositions, StepEnd};
 use crate::energy::HessianMode;
 use crate::error::{Error, Result};
 use crate::model::dynamics::{Damping, DynamicsOptions, StepMethod, StepSetup, StepState};
@@ -23,12 +25,14 @@ use crate::newton::NewtonOptions;
 use crate::sensitivity::{add_derivative_along, dot, schur_solve, ParamLayout, ParamVector};
 
 /// A direction in parameter space: the blocks of [`Model::param_zeros`] (missing ones are
-/// zero) and the changes of alpha_M (1/s) and beta_K (s).
+/// zero), the changes of alpha_M (1/s) and beta_K (s), and those of the cables' dashpot
+/// coefficients (N s/m, one per cable, tendons' ignored; empty: none).
 #[derive(Clone, Debug, Default)]
 pub struct TrajectoryDirection {
     pub params: ParamVector,
     pub mass_damping: f64,
     pub stiffness_damping: f64,
+    pub cable_damping: Vec<f64>,
 }
 
 /// One direction as the forward sweep carries it: its parameter blocks laid out flat, and the
@@ -37,6 +41,8 @@ struct Tangent {
     delta: Vec<f64>,
     mass_damping: f64,
     stiffness_damping: f64,
+    /// Per cable (N s/m).
+    cable_damping: Vec<f64>,
     current: Vec<f64>,
     previous: Vec<f64>,
 }
@@ -47,8 +53,9 @@ impl Model {
     /// along it: `[direction][frame]`, 3 n values each (m per unit of the direction; frame 0
     /// is all zeros).
     ///
-    /// Not differentiated (an error names them): contact, cable dashpots, steps that must be
-    /// halved to converge.
+    /// Contact and dashpots as in [`Model::trajectory_gradient`] (the barrier stiffness fixed
+    /// at each step's converged value); not differentiated (an error names them): friction,
+    /// steps that must be halved to converge.
     #[allow(clippy::too_many_arguments, clippy::type_complexity)]
     pub fn trajectory_sensitivity(
         &mut self,
@@ -77,13 +84,27 @@ impl Model {
             ParamLayout::new(&self.terms.parameterised(&load_terms))
         };
         let n_free = setup.free.len();
+        let n_cables = self.n_cables();
         let mut tangents = directions
             .iter()
             .map(|d| {
+                let cable_damping = match d.cable_damping.len() {
+                    0 => vec![0.0; n_cables],
+                    n if n == n_cables => d.cable_damping.clone(),
+                    n => {
+                        return Err(Error::shape(
+                            "cable_damping",
+                            format!("({n_cables},): one value per cable"),
+                            format!("{n} values"),
+                        ))
+                    }
+                };
+                crate::error::check_finite("cable_damping", &cable_damping)?;
                 Ok(Tangent {
                     delta: layout.flatten(&d.params)?,
                     mass_damping: d.mass_damping,
                     stiffness_damping: d.stiffness_damping,
+                    cable_damping,
                     current: vec![0.0; n_free],
                     previous: vec![0.0; n_free],
                 })
@@ -104,7 +125,12 @@ impl Model {
                 let iterations = self.converged_step(&setup, &mut state, dt, s, commands)?;
                 record.iterations.push(iterations);
                 record.positions.push(self.node_positions(&state.z));
+                record.balanced_contact_steps += usize::from(self.balanced_in_contact(&state.z));
                 let tensions = self.tendon_tensions();
+                let end = StepEnd {
+                    tensions: &tensions,
+                    barrier_stiffness: self.barrier_stiffness(),
+                };
                 self.tangent_step(
                     &setup,
                     loads,
@@ -113,7 +139,7 @@ impl Model {
                     s,
                     &start,
                     &state,
-                    &tensions,
+                    &end,
                     &mut tangents,
                 )?;
                 // The next step's solve starts from the tensions it solved for, not the scaled ones.
@@ -159,7 +185,7 @@ impl Model {
         k: usize,
         start: &StepState,
         end: &StepState,
-        end_tensions: &[f64],
+        step_end: &StepEnd,
         tangents: &mut [Tangent],
     ) -> Result<()> {
         if tangents.is_empty() {
@@ -169,7 +195,7 @@ impl Model {
         let scale = 1.0 + beta_k / h;
         let (z0, z1) = (&start.z, &end.z);
         let n_free = setup.free.len();
-        let damped_force = self.factor_step_end(setup, h, k, z1, end_tensions)?;
+        let (damped_force, dashpots) = self.factor_step_end(setup, h, k, (z0, z1), step_end)?;
         self.last_state = Some((z1.clone(), loads.clone()));
         let active = self.active_tendons();
         // The start force beta_K / h P F(z_k), with every tendon out of the internal force.
@@ -214,6 +240,17 @@ impl Model {
                     }
                 }
             }
+            // The dashpots: their coefficients' change, and the coupling to the step's start
+            // (+c / h dL/dz(z_{k+1}) (dL/dz(z_k) . du_k), displacement rows).
+            let mut dashpot_start = vec![0.0; n_full];
+            if !dashpots.is_empty() {
+                dashpots.add_damping_along(h, &tangent.cable_damping, &mut at_end);
+                let mut current = vec![0.0; n_full];
+                for (&d, &v) in setup.free.iter().zip(&tangent.current) {
+                    current[d] = v;
+                }
+                dashpots.add_start_product(&current, &mut dashpot_start);
+            }
             let start_stiffness = if beta_k > 0.0 {
                 self.assembler
                     .pattern()
@@ -241,7 +278,8 @@ impl Model {
                             beta_k / h * start_stiffness[f]
                         } else {
                             0.0
-                        };
+                        }
+                        + dashpot_start[d];
                     previous - derivative
                 })
                 .collect();
