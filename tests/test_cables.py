@@ -400,3 +400,28 @@ def test_anchor_reaction_closes_the_force_balance(silicone):
     assert anchor @ towards_anchor > 0.99 * np.linalg.norm(anchor) * np.linalg.norm(towards_anchor)
     summary = result.to_dict()["cables"]
     assert summary[0]["anchor_reaction"] == pytest.approx(anchor.tolist()) and summary[1]["anchor_reaction"] is None
+
+
+def test_a_cable_changed_after_a_solve_rebuilds_the_model(silicone):
+    """The compiled model holds the cables' dashpots and routing: a dashpot set on the cable
+    after a simulation must damp the next one (it did not: the model was kept), which then
+    equals a fresh body's."""
+
+    def body_with(cable):
+        mesh = sf.Mesh.box(size=(0.4, 0.1, 0.1), cells=(8, 2, 2))
+        body = sf.Body(mesh, silicone)
+        body.fix(mesh.nodes_on_plane((0, 0, 0), (1, 0, 0)))
+        body.add_cable(cable)
+        return body
+
+    def run(body):
+        return sf.simulate(body, 0.01, 10, actuation=[0.8], gravity=(0, 0, -9.81)).positions
+
+    cable = sf.Cable.line((0, 0.01, 0.09), (1, 0, 0), 0.4, 8, stiffness=1e4)
+    body = body_with(cable)
+    undamped = run(body)
+    cable.damping = 50.0
+    damped = run(body)
+    fresh = run(body_with(sf.Cable.line((0, 0.01, 0.09), (1, 0, 0), 0.4, 8, stiffness=1e4, damping=50.0)))
+    assert np.abs(damped - undamped).max() > 1e-4
+    np.testing.assert_allclose(damped, fresh, rtol=0, atol=1e-12)

@@ -621,7 +621,8 @@ class Body:
     _core_model = core_model
 
     def _built_model(self) -> Any:
-        key = (self._fixed.tobytes(), len(self._cables), self._formulation, tuple(self.formulation_options.items()))
+        key = (self._fixed.tobytes(), tuple(_cable_definition(c) for c in self._cables), self._formulation,
+               tuple(self.formulation_options.items()))
         if self._model is None or self._model_key != key:
             per_node = MODEL_BYTES_PER_NODE.get(self._formulation, max(MODEL_BYTES_PER_NODE.values()))
             check_memory(per_node * self._mesh.n_nodes,
@@ -653,6 +654,17 @@ class Body:
             f"Body({self._mesh!r}, {self._material!r}, formulation={self._formulation!r}{options}, "
             f"fixed={self._fixed.size} nodes)"
         )
+
+
+def _cable_definition(cable: Cable) -> tuple[Any, ...]:
+    """What the compiled model holds of ``cable`` (its points, routing and dashpot, not the
+    command or the stiffness a solve sets): a cable changed after a solve rebuilds the model
+    instead of solving with the old one."""
+    settings = cable.to_core()
+    points = settings.pop("points")
+    for per_solve in ("actuation", "stiffness", "pull", "tension"):
+        settings.pop(per_solve, None)
+    return (np.asarray(points).tobytes(), *sorted(settings.items()))
 
 
 def set_cable_values(model: Any, commands: Sequence[tuple[str, float]], stiffnesses: Sequence[float]) -> None:
