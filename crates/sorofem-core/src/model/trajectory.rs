@@ -147,16 +147,8 @@ impl Model {
         F: FnOnce(&RecordedPositions) -> Option<Vec<f64>>,
     {
         let steps = actuation.len();
-        if steps == 0 {
-            return Err(Error::invalid("steps", "at least one time step", 0));
-        }
-        self.check_differentiable()?;
-        let options = DynamicsOptions {
-            newton: newton.clone(),
-            method: StepMethod::Modified,
-            save_every: 1,
-        };
-        let setup = self.step_setup(loads, dt, steps, actuation, damping, &options)?;
+        let setup =
+            self.differentiable_setup(loads, dt, actuation, damping, newton, StepMethod::Modified)?;
         self.continuation = None;
         let saved_tensions = self.tendon_tensions();
         let (mut state, _) = self.start_of_run(&setup, initial_positions, initial_velocities)?;
@@ -223,6 +215,29 @@ impl Model {
     /// Friction is lagged at every step's start (its force depends on the start through the
     /// lagged normal forces and slip basis, and is not the gradient of an energy of the end):
     /// its derivatives are not implemented, so a body with friction is refused.
+    /// The step set-up of a differentiated run (every frame saved, solved by `method`), after
+    /// checking that it has steps and nothing the derivatives do not cover.
+    pub(super) fn differentiable_setup(
+        &mut self,
+        loads: &Loads,
+        dt: f64,
+        actuation: &[Vec<f64>],
+        damping: Damping,
+        newton: &NewtonOptions,
+        method: StepMethod,
+    ) -> Result<StepSetup> {
+        if actuation.is_empty() {
+            return Err(Error::invalid("steps", "at least one time step", 0));
+        }
+        self.check_differentiable()?;
+        let options = DynamicsOptions {
+            newton: newton.clone(),
+            method,
+            save_every: 1,
+        };
+        self.step_setup(loads, dt, actuation.len(), actuation, damping, &options)
+    }
+
     fn check_differentiable(&self) -> Result<()> {
         if self
             .terms

@@ -19,7 +19,7 @@
 use super::{RecordedPositions, StepEnd};
 use crate::energy::HessianMode;
 use crate::error::{Error, Result};
-use crate::model::dynamics::{Damping, DynamicsOptions, StepMethod, StepSetup, StepState};
+use crate::model::dynamics::{Damping, StepMethod, StepSetup, StepState};
 use crate::model::{Loads, Model};
 use crate::newton::NewtonOptions;
 use crate::sensitivity::{add_derivative_along, dot, schur_solve, ParamLayout, ParamVector};
@@ -68,17 +68,8 @@ impl Model {
         newton: &NewtonOptions,
         directions: &[TrajectoryDirection],
     ) -> Result<(RecordedPositions, Vec<Vec<Vec<f64>>>)> {
-        let steps = actuation.len();
-        if steps == 0 {
-            return Err(Error::invalid("steps", "at least one time step", 0));
-        }
-        self.check_differentiable()?;
-        let options = DynamicsOptions {
-            newton: newton.clone(),
-            method: StepMethod::Newton,
-            save_every: 1,
-        };
-        let setup = self.step_setup(loads, dt, steps, actuation, damping, &options)?;
+        let setup =
+            self.differentiable_setup(loads, dt, actuation, damping, newton, StepMethod::Newton)?;
         let layout = {
             let load_terms = self.terms.loads(loads);
             ParamLayout::new(&self.terms.parameterised(&load_terms))
