@@ -50,6 +50,7 @@ use super::dynamics::{
 };
 use super::system::FactorReuse;
 use super::{Loads, Model};
+use crate::assembly::Evaluation;
 use crate::cables::CableSlot;
 use crate::contact::ccd::DEFAULT_MIN_SEPARATION;
 use crate::energy::{HessianMode, TendonCommand};
@@ -254,6 +255,23 @@ impl Model {
         Ok(())
     }
 
+    /// The internal terms `which` selects (see [`ELASTIC`]) at the full DOF vector `z`.
+    fn internal_at(
+        &self,
+        z: &[f64],
+        which: [bool; 3],
+        gradient: bool,
+        hessian: Option<HessianMode>,
+    ) -> Evaluation {
+        self.assembler
+            .evaluate_selected(&self.terms.internal(), &which, z, gradient, hessian)
+    }
+
+    /// Whether the model has spring cables or tendons.
+    fn has_cables(&self) -> bool {
+        !(self.terms.cables.cables.is_empty() && self.terms.tendons.tendons.is_empty())
+    }
+
     /// The barrier stiffness of the last step (J/m^4; 0 without contact).
     fn barrier_stiffness(&self) -> f64 {
         self.terms.contact.as_ref().map_or(0.0, |c| c.stiffness())
@@ -381,6 +399,7 @@ impl Model {
             next: vec![0.0; n_free],
             after_next: vec![0.0; n_free],
             start_force_term: vec![0.0; n_free],
+            elastic_end: None,
         };
         for (segment, ends) in checkpoints.windows(2).enumerate().rev() {
             let (checkpoint, next) = (&ends[0], &ends[1]);
@@ -441,6 +460,8 @@ impl Model {
     /// stiffness the step converged with) and returns the damped internal force `F(z1)` that
     /// beta_K scales (free DOFs, N; the tendons' force and the dashpots' out) and the step's
     /// dashpots. The tendons keep their tensions divided by the internal scale `1 + beta_K / h`.
+    /// `elastic`: the elastic term's gradient and exact Hessian at `z1` when already assembled
+    /// (as the start of step k + 1).
     fn factor_step_end(
         &mut self,
         setup: &StepSetup,
@@ -448,6 +469,7 @@ impl Model {
         k: usize,
         (z0, z1): (&[f64], &[f64]),
         end: &StepEnd,
+        elastic: Option<Evaluation>,
     ) -> Result<(Vec<f64>, StepDashpots)> {
         let (alpha_m, beta_k) = (setup.damping.mass, setup.damping.stiffness);
         let scale = 1.0 + beta_k / h;
@@ -464,12 +486,21 @@ impl Model {
             contact.set_stiffness(end.barrier_stiffness);
         }
         self.cover_self_contact(z1)?;
-        // The dashpots as the step's solve had them (over h + beta_K: see `Model::time_step`).
-        self.terms.cables.begin_step(h + beta_k, z0);
-        let mut eval =
-            self.assembler
-                .evaluate(&self.terms.internal(), z1, true, Some(HessianMode::Exact));
-        self.terms.cables.end_step();
+        // Self-contact may have grown the pattern since `elastic` was assembled.
+        let nnz = self.assembler.pattern().nnz();
+        let mut eval = match elastic {
+            Some(elastic) if elastic.hessian.len() == nnz => elastic,
+            _ => self.internal_at(z1, ELASTIC, true, Some(HessianMode::Exact)),
+        };
+        if self.has_cables() {
+            // The dashpots as the step's solve had them (over h + beta_K: see
+            // `Model::time_step`).
+            self.terms.cables.begin_step(h + beta_k, z0);
+            let cables = self.internal_at(z1, CABLES_AND_TENDONS, true, Some(HessianMode::Exact));
+            self.terms.cables.end_step();
+            add_to(&mut eval.gradient, &cables.gradient);
+            add_to(&mut eval.hessian, &cables.hessian);
+        }
         eval.hessian.iter_mut().for_each(|v| *v *= scale);
         // Contact after the scaling: Rayleigh damping is the body's, not the barrier's.
         self.add_contact_hessian(z1, &mut eval.hessian, HessianMode::Exact);
@@ -525,7 +556,9 @@ impl Model {
         let scale = 1.0 + beta_k / h;
         let (z0, z1) = (&start.z, &end.z);
         let n_free = setup.free.len();
-        let (damped_force, dashpots) = self.factor_step_end(setup, h, k, (z0, z1), step_end)?;
+        let elastic_end = sweep.elastic_end.take();
+        let (damped_force, dashpots) =
+            self.factor_step_end(setup, h, k, (z0, z1), step_end, elastic_end)?;
 
         let mut lambda: Vec<f64> = (0..n_free)
             .map(|f| {
@@ -556,16 +589,22 @@ impl Model {
             }
         }
 
-        // The start force beta_K / h P F(z_k), with every tendon out of the internal force.
-        for tendon in &mut self.terms.tendons.tendons {
-            tendon.tension = 0.0;
+        // The start force beta_K / h P F(z_k), the tendons out of the internal force. The
+        // elastic term at z_k is step k - 1's end too: assembled once, its Hessian kept.
+        let start_hessian = (beta_k > 0.0).then_some(HessianMode::Exact);
+        let elastic_hessian = if k > 0 {
+            Some(HessianMode::Exact)
+        } else {
+            start_hessian
+        };
+        let start_elastic = self.internal_at(z0, ELASTIC, true, elastic_hessian);
+        let start_cables = self
+            .has_cables()
+            .then(|| self.internal_at(z0, CABLES, true, start_hessian));
+        let mut start_force = start_elastic.gradient.clone();
+        if let Some(cables) = &start_cables {
+            add_to(&mut start_force, &cables.gradient);
         }
-        let start_eval = self.assembler.evaluate(
-            &self.terms.internal(),
-            z0,
-            true,
-            (beta_k > 0.0).then_some(HessianMode::Exact),
-        );
         let projected: Vec<f64> = (0..n_free)
             .map(|f| {
                 if f < setup.n_displacement {
@@ -576,14 +615,19 @@ impl Model {
             })
             .collect();
         sweep.start_force_term = if beta_k > 0.0 {
-            let product = self
-                .assembler
-                .pattern()
-                .symmetric_matvec(&start_eval.hessian, &projected);
+            let pattern = self.assembler.pattern();
+            let mut product = pattern.symmetric_matvec(&start_elastic.hessian, &projected);
+            if let Some(cables) = &start_cables {
+                add_to(
+                    &mut product,
+                    &pattern.symmetric_matvec(&cables.hessian, &projected),
+                );
+            }
             product.iter().map(|v| beta_k / h * v).collect()
         } else {
             vec![0.0; n_free]
         };
+        sweep.elastic_end = (k > 0).then_some(start_elastic);
 
         let mut at_end = vec![0.0; z1.len()];
         let mut at_start = vec![0.0; z1.len()];
@@ -673,7 +717,7 @@ impl Model {
             let velocity = end.velocity[f];
             sweep.mass_damping -= l * setup.mass[f] * velocity;
             let start_force = if f < setup.n_displacement {
-                start_eval.gradient[f]
+                start_force[f]
             } else {
                 0.0
             };
@@ -697,6 +741,19 @@ struct Sweep {
     /// `beta_K / h K_F(z_{k+1}) P lambda_{k+1}` and the dashpots' `c / h dL/dz(z_{k+1})
     /// (dL/dz(z_{k+2}) . lambda_{k+1})`.
     start_force_term: Vec<f64>,
+    /// The elastic term's gradient and exact Hessian at `z_{k+1}`, assembled as step k + 1's
+    /// start, for step k's end.
+    elastic_end: Option<Evaluation>,
+}
+
+/// Which of the internal terms (elastic, spring cables, tendons: [`super::terms`]'s
+/// `internal` order) an evaluation takes.
+const ELASTIC: [bool; 3] = [true, false, false];
+const CABLES: [bool; 3] = [false, true, false];
+const CABLES_AND_TENDONS: [bool; 3] = [false, true, true];
+
+fn add_to(total: &mut [f64], part: &[f64]) {
+    total.iter_mut().zip(part).for_each(|(t, p)| *t += p);
 }
 
 #[cfg(test)]

@@ -186,7 +186,8 @@ impl Model {
         let scale = 1.0 + beta_k / h;
         let (z0, z1) = (&start.z, &end.z);
         let n_free = setup.free.len();
-        let (damped_force, dashpots) = self.factor_step_end(setup, h, k, (z0, z1), step_end)?;
+        let (damped_force, dashpots) =
+            self.factor_step_end(setup, h, k, (z0, z1), step_end, None)?;
         self.last_state = Some((z1.clone(), loads.clone()));
         let active = self.active_tendons();
         // The start force beta_K / h P F(z_k), with every tendon out of the internal force.
