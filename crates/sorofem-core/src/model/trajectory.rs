@@ -49,8 +49,9 @@ use super::dynamics::{
     Damping, DynamicsOptions, StepMethod, StepSetup, StepState, MAX_CONTRACTION,
 };
 use super::system::FactorReuse;
+use super::terms::Terms;
 use super::{Loads, Model};
-use crate::assembly::Evaluation;
+use crate::assembly::{Assembler, Evaluation};
 use crate::cables::CableSlot;
 use crate::contact::ccd::DEFAULT_MIN_SEPARATION;
 use crate::energy::{HessianMode, TendonCommand};
@@ -400,6 +401,9 @@ impl Model {
             after_next: vec![0.0; n_free],
             start_force_term: vec![0.0; n_free],
             elastic_end: None,
+            start_weights: None,
+            pending_elastic: None,
+            load_weights: vec![0.0; self.layout.n_full()],
         };
         for (segment, ends) in checkpoints.windows(2).enumerate().rev() {
             let (checkpoint, next) = (&ends[0], &ends[1]);
@@ -445,6 +449,16 @@ impl Model {
                 )?;
             }
         }
+        // The loads' parameter derivatives do not depend on the state: one contraction with
+        // the sum of every step's weights.
+        let load_terms = self.terms.loads(loads);
+        let terms = self.terms.parameterised(&load_terms);
+        for (term, offsets) in terms.iter().zip(&layout.term_offsets) {
+            if term.is_linear() {
+                let z = &checkpoints[0].state.z;
+                add_contraction(*term, offsets, z, &sweep.load_weights, &mut sweep.flat);
+            }
+        }
         Ok(TrajectoryGradient {
             params: layout.unflatten(&sweep.flat),
             actuation: sweep.actuation,
@@ -461,8 +475,10 @@ impl Model {
     /// beta_K scales (free DOFs, N; the tendons' force and the dashpots' out) and the step's
     /// dashpots. The tendons keep their tensions divided by the internal scale `1 + beta_K / h`.
     /// `elastic`: the elastic term's gradient and exact Hessian at `z1` when already assembled
-    /// (as the start of step k + 1).
-    fn factor_step_end(
+    /// (as the start of step k + 1). `beside` runs on another thread while the (sequential)
+    /// factorisation does; it sees the assembler and the terms, not the factor.
+    #[allow(clippy::too_many_arguments)]
+    fn factor_step_end<R: Send>(
         &mut self,
         setup: &StepSetup,
         h: f64,
@@ -470,7 +486,8 @@ impl Model {
         (z0, z1): (&[f64], &[f64]),
         end: &StepEnd,
         elastic: Option<Evaluation>,
-    ) -> Result<(Vec<f64>, StepDashpots)> {
+        beside: impl FnOnce(&Assembler, &Terms) -> R + Send,
+    ) -> Result<(Vec<f64>, StepDashpots, R)> {
         let (alpha_m, beta_k) = (setup.damping.mass, setup.damping.stiffness);
         let scale = 1.0 + beta_k / h;
         // The tendons as the step's solve had them at its end, their tensions (multipliers or
@@ -509,10 +526,12 @@ impl Model {
         for (f, &m) in setup.mass.iter().enumerate() {
             eval.hessian[col_ptr[f]] += m / (h * h) + alpha_m * m / h;
         }
-        if !self
-            .factor
-            .factor(self.assembler.pattern(), &eval.hessian)?
-        {
+        let (factor, assembler, terms) = (&mut self.factor, &self.assembler, &self.terms);
+        let (factored, beside) = rayon::join(
+            || factor.factor(assembler.pattern(), &eval.hessian),
+            || beside(assembler, terms),
+        );
+        if !factored? {
             return Err(Error::LinearSolver {
                 message: format!("the Hessian of time step {k} is singular at its end: the trajectory gradient is undefined there"),
             });
@@ -530,7 +549,7 @@ impl Model {
         for (g, &d) in damped_force.iter_mut().zip(&setup.free) {
             *g -= other_force[d];
         }
-        Ok((damped_force, dashpots))
+        Ok((damped_force, dashpots, beside))
     }
 
     /// Step k of the adjoint sweep: `lambda_k` from the step's Hessian at its end, then its
@@ -556,9 +575,38 @@ impl Model {
         let scale = 1.0 + beta_k / h;
         let (z0, z1) = (&start.z, &end.z);
         let n_free = setup.free.len();
+        // Beside the factorisation: the elastic term at the step's start (also step k - 1's
+        // end, so with its Hessian then) and the elastic parameter derivatives step k + 1 left.
         let elastic_end = sweep.elastic_end.take();
-        let (damped_force, dashpots) =
-            self.factor_step_end(setup, h, k, (z0, z1), step_end, elastic_end)?;
+        let start_hessian = (beta_k > 0.0).then_some(HessianMode::Exact);
+        let elastic_hessian = if k > 0 {
+            Some(HessianMode::Exact)
+        } else {
+            start_hessian
+        };
+        let pending = sweep.pending_elastic.take();
+        let (flat_total, elastic_offsets) = (&mut sweep.flat, &layout.term_offsets[0]);
+        let (damped_force, dashpots, start_elastic) = self.factor_step_end(
+            setup,
+            h,
+            k,
+            (z0, z1),
+            step_end,
+            elastic_end,
+            |assembler, terms| {
+                let start = assembler.evaluate_selected(
+                    &terms.internal(),
+                    &ELASTIC,
+                    z0,
+                    true,
+                    elastic_hessian,
+                );
+                if let Some((z, w)) = pending {
+                    add_contraction(&terms.elastic, elastic_offsets, &z, &w, flat_total);
+                }
+                start
+            },
+        )?;
 
         let mut lambda: Vec<f64> = (0..n_free)
             .map(|f| {
@@ -589,15 +637,8 @@ impl Model {
             }
         }
 
-        // The start force beta_K / h P F(z_k), the tendons out of the internal force. The
-        // elastic term at z_k is step k - 1's end too: assembled once, its Hessian kept.
-        let start_hessian = (beta_k > 0.0).then_some(HessianMode::Exact);
-        let elastic_hessian = if k > 0 {
-            Some(HessianMode::Exact)
-        } else {
-            start_hessian
-        };
-        let start_elastic = self.internal_at(z0, ELASTIC, true, elastic_hessian);
+        // The start force beta_K / h P F(z_k), the tendons out of the internal force (the
+        // elastic term's part assembled beside the factorisation).
         let start_cables = self
             .has_cables()
             .then(|| self.internal_at(z0, CABLES, true, start_hessian));
@@ -648,19 +689,33 @@ impl Model {
         let load_terms = self.terms.loads(loads);
         let terms = self.terms.parameterised(&load_terms);
         let mut flat = vec![0.0; layout.len];
-        // The registry's order: elastic, gravity, point gravity, spring cables, tendons; the
-        // elastic and spring-cable forces carry the internal scale and the start force.
+        // The registry's order: elastic, gravity, point gravity, spring cables, tendons. The
+        // elastic and spring-cable forces carry the internal scale and the start force. The
+        // elastic force's derivatives at z_{k+1} take step k + 1's start weights along, in one
+        // pass beside step k - 1's factorisation; the loads' (linear: the same at every state)
+        // are contracted once with the sum of every step's weights (`Model::backward`).
+        add_to(&mut sweep.load_weights, &at_end);
+        let scaled: Vec<f64> = at_end.iter().map(|v| scale * v).collect();
+        let mut elastic_weights = scaled.clone();
+        if let Some(start_weights) = sweep.start_weights.take() {
+            add_to(&mut elastic_weights, &start_weights);
+        }
         for (i, (term, offsets)) in terms.iter().zip(&layout.term_offsets).enumerate() {
-            let internal = i == 0 || i == 3;
-            let w: Vec<f64> = if internal {
-                at_end.iter().map(|v| scale * v).collect()
-            } else {
-                at_end.clone()
-            };
-            add_contraction(*term, offsets, z1, &w, &mut flat);
-            if internal && beta_k > 0.0 {
+            match i {
+                0 if k > 0 => {}
+                0 => add_contraction(*term, offsets, z1, &elastic_weights, &mut flat),
+                3 => add_contraction(*term, offsets, z1, &scaled, &mut flat),
+                _ if term.is_linear() => {}
+                _ => add_contraction(*term, offsets, z1, &at_end, &mut flat),
+            }
+            let start_too = i == 3 || (i == 0 && k == 0);
+            if start_too && beta_k > 0.0 {
                 add_contraction(*term, offsets, z0, &at_start, &mut flat);
             }
+        }
+        if k > 0 {
+            sweep.pending_elastic = Some((z1.clone(), elastic_weights));
+            sweep.start_weights = (beta_k > 0.0).then_some(at_start);
         }
         // The lumped mass: d(M a)/d rho_e = V_e / 4 a on each of the tet's nodes.
         let mut inertial = vec![0.0; z1.len()];
@@ -744,6 +799,14 @@ struct Sweep {
     /// The elastic term's gradient and exact Hessian at `z_{k+1}`, assembled as step k + 1's
     /// start, for step k's end.
     elastic_end: Option<Evaluation>,
+    /// `beta_K / h P lambda_{k+1}` (full DOFs): the weights of the elastic force's parameter
+    /// derivatives at `z_{k+1}` as step k + 1's start force, contracted with step k's.
+    start_weights: Option<Vec<f64>>,
+    /// A state and the weights of the elastic force's parameter derivatives there, not yet
+    /// contracted (see `Model::adjoint_step`).
+    pending_elastic: Option<(Vec<f64>, Vec<f64>)>,
+    /// The sum over the steps so far of the loads' weights `-lambda_k` (full DOFs).
+    load_weights: Vec<f64>,
 }
 
 /// Which of the internal terms (elastic, spring cables, tendons: [`super::terms`]'s

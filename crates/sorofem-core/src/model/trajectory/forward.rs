@@ -186,20 +186,22 @@ impl Model {
         let scale = 1.0 + beta_k / h;
         let (z0, z1) = (&start.z, &end.z);
         let n_free = setup.free.len();
-        let (damped_force, dashpots) =
-            self.factor_step_end(setup, h, k, (z0, z1), step_end, None)?;
+        // The start force beta_K / h P F(z_k), the tendons out of the internal force: assembled
+        // beside the factorisation.
+        let start_hessian = (beta_k > 0.0).then_some(HessianMode::Exact);
+        let (damped_force, dashpots, start_eval) =
+            self.factor_step_end(setup, h, k, (z0, z1), step_end, None, |assembler, terms| {
+                let without_tendons = [true, true, false];
+                assembler.evaluate_selected(
+                    &terms.internal(),
+                    &without_tendons,
+                    z0,
+                    true,
+                    start_hessian,
+                )
+            })?;
         self.last_state = Some((z1.clone(), loads.clone()));
         let active = self.active_tendons();
-        // The start force beta_K / h P F(z_k), with every tendon out of the internal force.
-        for tendon in &mut self.terms.tendons.tendons {
-            tendon.tension = 0.0;
-        }
-        let start_eval = self.assembler.evaluate(
-            &self.terms.internal(),
-            z0,
-            true,
-            (beta_k > 0.0).then_some(HessianMode::Exact),
-        );
         let load_terms = self.terms.loads(loads);
         let terms = self.terms.parameterised(&load_terms);
         let density_offset = layout
