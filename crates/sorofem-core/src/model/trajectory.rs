@@ -41,17 +41,17 @@
 
 mod dashpot;
 mod forward;
+mod step_end;
 
 pub use forward::TrajectoryDirection;
 
-use self::dashpot::StepDashpots;
+use self::step_end::{add_to, CABLES, ELASTIC};
 use super::dynamics::{
     Damping, DynamicsOptions, StepMethod, StepSetup, StepState, MAX_CONTRACTION,
 };
 use super::system::FactorReuse;
-use super::terms::Terms;
 use super::{Loads, Model};
-use crate::assembly::{Assembler, Evaluation};
+use crate::assembly::Evaluation;
 use crate::cables::CableSlot;
 use crate::contact::ccd::DEFAULT_MIN_SEPARATION;
 use crate::energy::{HessianMode, TendonCommand};
@@ -256,23 +256,6 @@ impl Model {
         Ok(())
     }
 
-    /// The internal terms `which` selects (see [`ELASTIC`]) at the full DOF vector `z`.
-    fn internal_at(
-        &self,
-        z: &[f64],
-        which: [bool; 3],
-        gradient: bool,
-        hessian: Option<HessianMode>,
-    ) -> Evaluation {
-        self.assembler
-            .evaluate_selected(&self.terms.internal(), &which, z, gradient, hessian)
-    }
-
-    /// Whether the model has spring cables or tendons.
-    fn has_cables(&self) -> bool {
-        !(self.terms.cables.cables.is_empty() && self.terms.tendons.tendons.is_empty())
-    }
-
     /// The barrier stiffness of the last step (J/m^4; 0 without contact).
     fn barrier_stiffness(&self) -> f64 {
         self.terms.contact.as_ref().map_or(0.0, |c| c.stiffness())
@@ -466,90 +449,6 @@ impl Model {
             stiffness_damping: sweep.stiffness_damping,
             cable_damping: sweep.cable_damping,
         })
-    }
-
-    /// Factors step k's Hessian `H_k = dr_k/du_{k+1}` at its converged end `z1` (from `z0`; the
-    /// tendons as the step's solve had them there, the cables' dashpots on, the contact
-    /// barrier's exact Hessian with the obstacles where they are at the step's end and the
-    /// stiffness the step converged with) and returns the damped internal force `F(z1)` that
-    /// beta_K scales (free DOFs, N; the tendons' force and the dashpots' out) and the step's
-    /// dashpots. The tendons keep their tensions divided by the internal scale `1 + beta_K / h`.
-    /// `elastic`: the elastic term's gradient and exact Hessian at `z1` when already assembled
-    /// (as the start of step k + 1). `beside` runs on another thread while the (sequential)
-    /// factorisation does; it sees the assembler and the terms, not the factor.
-    #[allow(clippy::too_many_arguments)]
-    fn factor_step_end<R: Send>(
-        &mut self,
-        setup: &StepSetup,
-        h: f64,
-        k: usize,
-        (z0, z1): (&[f64], &[f64]),
-        end: &StepEnd,
-        elastic: Option<Evaluation>,
-        beside: impl FnOnce(&Assembler, &Terms) -> R + Send,
-    ) -> Result<(Vec<f64>, StepDashpots, R)> {
-        let (alpha_m, beta_k) = (setup.damping.mass, setup.damping.stiffness);
-        let scale = 1.0 + beta_k / h;
-        // The tendons as the step's solve had them at its end, their tensions (multipliers or
-        // commands) divided by the internal scale: their force is the motor's, not damped.
-        for (tendon, &t) in self.terms.tendons.tendons.iter_mut().zip(end.tensions) {
-            tendon.tension = match tendon.command {
-                TendonCommand::Pull(_) => t / scale,
-                TendonCommand::Tension(command) => command / scale,
-            };
-        }
-        if let Some(contact) = &mut self.terms.contact {
-            contact.set_time((k + 1) as f64 * h);
-            contact.set_stiffness(end.barrier_stiffness);
-        }
-        self.cover_self_contact(z1)?;
-        // Self-contact may have grown the pattern since `elastic` was assembled.
-        let nnz = self.assembler.pattern().nnz();
-        let mut eval = match elastic {
-            Some(elastic) if elastic.hessian.len() == nnz => elastic,
-            _ => self.internal_at(z1, ELASTIC, true, Some(HessianMode::Exact)),
-        };
-        if self.has_cables() {
-            // The dashpots as the step's solve had them (over h + beta_K: see
-            // `Model::time_step`).
-            self.terms.cables.begin_step(h + beta_k, z0);
-            let cables = self.internal_at(z1, CABLES_AND_TENDONS, true, Some(HessianMode::Exact));
-            self.terms.cables.end_step();
-            add_to(&mut eval.gradient, &cables.gradient);
-            add_to(&mut eval.hessian, &cables.hessian);
-        }
-        eval.hessian.iter_mut().for_each(|v| *v *= scale);
-        // Contact after the scaling: Rayleigh damping is the body's, not the barrier's.
-        self.add_contact_hessian(z1, &mut eval.hessian, HessianMode::Exact);
-        // The diagonal is each column's first entry of the lower pattern.
-        let col_ptr = &self.assembler.pattern().col_ptr;
-        for (f, &m) in setup.mass.iter().enumerate() {
-            eval.hessian[col_ptr[f]] += m / (h * h) + alpha_m * m / h;
-        }
-        let (factor, assembler, terms) = (&mut self.factor, &self.assembler, &self.terms);
-        let (factored, beside) = rayon::join(
-            || factor.factor(assembler.pattern(), &eval.hessian),
-            || beside(assembler, terms),
-        );
-        if !factored? {
-            return Err(Error::LinearSolver {
-                message: format!("the Hessian of time step {k} is singular at its end: the trajectory gradient is undefined there"),
-            });
-        }
-        // The damped internal force at the end (what beta_K scales): the tendons' and the
-        // dashpots' out (the dashpots' force c dL/dt does not change with beta_K).
-        let dashpots =
-            StepDashpots::new(&self.terms.cables, &self.spring_cable_indices(), h, z0, z1);
-        let mut damped_force = eval.gradient;
-        let mut other_force = vec![0.0; z1.len()];
-        for tendon in &self.terms.tendons.tendons {
-            tendon.add_length_gradient(z1, tendon.tension, &mut other_force);
-        }
-        dashpots.add_force(1.0 / scale, &mut other_force);
-        for (g, &d) in damped_force.iter_mut().zip(&setup.free) {
-            *g -= other_force[d];
-        }
-        Ok((damped_force, dashpots, beside))
     }
 
     /// Step k of the adjoint sweep: `lambda_k` from the step's Hessian at its end, then its
@@ -807,16 +706,6 @@ struct Sweep {
     pending_elastic: Option<(Vec<f64>, Vec<f64>)>,
     /// The sum over the steps so far of the loads' weights `-lambda_k` (full DOFs).
     load_weights: Vec<f64>,
-}
-
-/// Which of the internal terms (elastic, spring cables, tendons: [`super::terms`]'s
-/// `internal` order) an evaluation takes.
-const ELASTIC: [bool; 3] = [true, false, false];
-const CABLES: [bool; 3] = [false, true, false];
-const CABLES_AND_TENDONS: [bool; 3] = [false, true, true];
-
-fn add_to(total: &mut [f64], part: &[f64]) {
-    total.iter_mut().zip(part).for_each(|(t, p)| *t += p);
 }
 
 #[cfg(test)]
