@@ -354,10 +354,14 @@ def sweep(
 
     # The cluster first: a scheduler that cannot be reached leaves no folder behind.
     with _client(client, scheduler, workers) as dask:
-        if same:
-            store.clean_temporaries()
-        else:
-            store.clear()
+        n_threads = sum(dask.nthreads().values())
+        if n_threads == 0:
+            say(f"no worker is connected to the scheduler {dask.scheduler.address} yet: the cases wait for one")
+        n_threads = max(n_threads, 1)
+        batches = _batches(groups, todo, n_threads, batch_size)
+        sizes = sorted({len(b) for b in batches})
+        result.workers = n_threads
+        if not same:
             manifest = {
                 "sorofem_version": __version__,
                 "fingerprint": fingerprint,
@@ -374,28 +378,29 @@ def sweep(
                 "columns": [name for name, _ in columns],
                 "runs": [],
             }
-            store.create(manifest, key_columns, table.columns(), columns)
-            if save:
-                store.create_fields(save, table.n, probe.mesh.n_nodes)
         assert manifest is not None
-        n_threads = sum(dask.nthreads().values())
-        if n_threads == 0:
-            say(f"no worker is connected to the scheduler {dask.scheduler.address} yet: the cases wait for one")
-        n_threads = max(n_threads, 1)
-        batches = _batches(groups, todo, n_threads, batch_size)
-        sizes = sorted({len(b) for b in batches})
         run = len(manifest["runs"])
         manifest["runs"].append({"started": datetime.now(timezone.utc).isoformat(timespec="seconds"),
                                  "cases_before": len(done), "workers": n_threads, "batches": len(batches),
                                  "batch_size": sizes[-1], "scheduler": dask.scheduler.address if dask.scheduler else None})
-        store.write_manifest(manifest)
-        result.workers = n_threads
-        resumed = f"; resuming: {len(done)} already in {store.root}, {len(todo)} to solve" if done else ""
-        cut = f"of {sizes[0]}" if len(sizes) == 1 else f"of {sizes[-1]} down to {sizes[0]}"
-        say(f"{path.name}: {table.n} cases ({keys}) in {len(groups)} group(s) sharing a model, "
-            f"{n_threads} worker(s), {len(batches)} batches {cut} cases{resumed}")
+
+        # Called by _execute once the batches are sent: the workers start solving meanwhile.
+        def write_folder() -> None:
+            if same:
+                store.clean_temporaries()
+                store.write_manifest(manifest)
+            else:
+                store.clear()
+                store.create(manifest, key_columns, table.columns(), columns)
+                if save:
+                    store.create_fields(save, table.n, probe.mesh.n_nodes)
+            resumed = f"; resuming: {len(done)} already in {store.root}, {len(todo)} to solve" if done else ""
+            cut = f"of {sizes[0]}" if len(sizes) == 1 else f"of {sizes[-1]} down to {sizes[0]}"
+            say(f"{path.name}: {table.n} cases ({keys}) in {len(groups)} group(s) sharing a model, "
+                f"{n_threads} worker(s), {len(batches)} batches {cut} cases{resumed}")
+
         _execute(dask, store, table, path, text, batches, points, save, len(probe.cables), columns, run, result,
-                 progress)
+                 progress, write_folder)
     result.time = time.perf_counter() - start
     return result
 
@@ -423,8 +428,10 @@ def _interruptible() -> Iterator[threading.Event]:
 
 def _execute(dask: Any, store: Store, table: Cases, path: Path, text: str, batches: list[list[int]],
              points: np.ndarray, save: tuple[str, ...], n_cables: int, columns: list[tuple[str, str]], run: int,
-             result: SweepResult, progress: bool | None) -> None:
-    """Submit the batches, write each as it finishes, keep the counts of ``result``."""
+             result: SweepResult, progress: bool | None, write_folder: Callable[[], None]) -> None:
+    """Submit the batches, then ``write_folder`` (the record and the case table: the workers
+    solve meanwhile, nothing is written before it), then write each batch as it finishes and
+    keep the counts of ``result``."""
     keys = tuple(k.text for k in table.keys)
     marker_points = tuple(tuple(float(v) for v in p) for p in points)
     total = sum(len(m) for m in batches)
@@ -444,6 +451,7 @@ def _execute(dask: Any, store: Store, table: Cases, path: Path, text: str, batch
             for b, (future, members) in enumerate(zip(submitted, batches)):
                 futures[future] = (b, members)
                 future.add_done_callback(finished.put)
+            write_folder()
             while futures:
                 if stop.is_set():
                     raise KeyboardInterrupt
