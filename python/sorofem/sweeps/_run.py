@@ -39,12 +39,13 @@ __all__ = ["sweep", "SweepResult", "CONNECT_TIMEOUT", "local_cluster", "LOCAL_CL
 
 #: Seconds to wait for a scheduler given by address before giving up.
 CONNECT_TIMEOUT = 5.0
-#: The batches shrink as the sweep goes on (guided self-scheduling): each holds about
-#: 1 / (SHARE x workers) of the cases left, so that the first are large (few tasks for the
-#: scheduler) and the last small (the workers finish together, none waits on a long last batch) ...
+#: The batches shrink as the sweep goes on (factoring: rounds of one batch per worker, each
+#: batch 1 / (SHARE x workers) of the cases left when its round starts), so that the first are
+#: large (few tasks: each costs the scheduler, the driver and the worker a few ms of CPU) and
+#: the last small (the workers finish together, none waits on a long last batch) ...
 SHARE = 2
-#: ... none smaller than the cases / (MAX_BATCHES_PER_WORKER x workers) (each task costs the
-#: scheduler a few ms) ...
+#: ... none smaller than the cases / (MAX_BATCHES_PER_WORKER x workers), a round that would
+#: leave fewer cases than a round of those taking them all, evenly ...
 MAX_BATCHES_PER_WORKER = 8
 #: ... and none larger than this (how much an interruption can lose per worker).
 MAX_BATCH = 50
@@ -207,18 +208,25 @@ def _markers(markers: ArrayLike | None, probe: Scene, base: dict[str, Any]) -> n
 
 def _batches(groups: dict[int, list[int]], todo: set[int], workers: int, size: int | None = None) -> list[list[int]]:
     """The cases to solve, cut into batches of one group each, in the order they are sent: of
-    ``size`` cases, or without it shrinking from ``MAX_BATCH`` (see :data:`SHARE`)."""
+    ``size`` cases, or without it shrinking round by round from ``MAX_BATCH`` (see :data:`SHARE`)."""
     left = len(todo)
     smallest = max(1, math.ceil(left / (MAX_BATCHES_PER_WORKER * workers)))
-    out = []
+    out: list[list[int]] = []
+    n = size or 0
+    in_round = 0
     for members in groups.values():
         pending = [i for i in members if i in todo]
         k = 0
         while k < len(pending):
-            n = size or min(MAX_BATCH, max(smallest, math.ceil(left / (SHARE * workers))))
+            if size is None and in_round == 0:
+                n = min(MAX_BATCH, max(smallest, math.ceil(left / (SHARE * workers))))
+                if left - workers * n < workers * smallest:
+                    n = min(MAX_BATCH, math.ceil(left / workers))
+                in_round = workers
             out.append(pending[k:k + n])
             k += n
             left -= len(out[-1])
+            in_round -= 1
     return out
 
 
@@ -284,8 +292,9 @@ def sweep(
         The address of a running Dask scheduler (``tcp://HOST:PORT``) to connect to instead.
     batch_size
         Cases sent to a worker at once. Default: batches that shrink as the sweep goes on,
-        each about half a worker's share of the cases left (at most 50, at least 1/8 of a
-        worker's share of the sweep), so that the workers finish together.
+        in rounds of one per worker, each half a worker's share of the cases left when its
+        round starts (at most 50, at least 1/8 of a worker's share of the sweep), so that the
+        workers finish together.
     force
         Replace the sweep ``out`` holds if it is another one (by default that is refused).
     progress
