@@ -197,3 +197,25 @@ def test_an_unreachable_schedule_exits_3_with_its_summary(tmp_path, capsys):
     summary = json.loads((tmp_path / "out" / "summary.json").read_text(encoding="utf-8"))
     assert summary["converged"] is False and summary["reachable"] is False
     assert summary["distance"] > 0.03 and len(summary["schedule"]["0"]) == 3  # t = 0 and the two keyframes
+
+
+def test_a_cable_dashpot_is_fitted_to_motion(tmp_path, capsys):
+    """[estimate] params = ["cable_damping"]: the dashpot of the scene's cable, pulled to 0.8 at
+    the start, comes back to 1e-6 relative from exact tracks of two free-end nodes."""
+    truth = 20.0
+    text = BASE + CABLE + "actuation = 0.8\ndamping = 5.0\n" + "\n[dynamics]\ndt = 0.01\nsteps = 12\n"
+    scene = sf.Scene.from_toml(text, tmp_path / "truth.toml")
+    scene.body.set_cable_damping(0, truth)
+    run = sf.simulate(scene.body, 0.01, 12, gravity=scene.gravity, tolerance=1e-12, method="newton", progress=False)
+    undamped = scene.body.replace()
+    undamped.set_cable_damping(0, 5.0)
+    slow = sf.simulate(undamped, 0.01, 12, gravity=scene.gravity, tolerance=1e-12, method="newton", progress=False)
+    assert np.abs(run.positions - slow.positions).max() > 1e-5  # the dashpot shows in the data
+    nodes = np.flatnonzero(np.isclose(scene.mesh.points[:, 0], 0.1))[:2]
+    rows = [[k * 0.01, m, *run.positions[k, node]] for k in range(1, 13) for m, node in enumerate(nodes)]
+    tracks = "\n[target]\nnodes = " + json.dumps(nodes.tolist()) + "\ntracks = " + json.dumps(rows) + "\n"
+    estimate = '\n[estimate]\nparams = ["cable_damping"]\nx0 = [5.0]\n'
+    code, err = _run("estimate", text + tracks + estimate, tmp_path, capsys)
+    assert code == 0, err
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text(encoding="utf-8"))
+    assert summary["params"]["cable_damping"] == pytest.approx(truth, rel=1e-6)

@@ -389,6 +389,8 @@ class Model:
         """Cable `cable`'s alpha (> 0; 1 = rest, < 1 = pulled)."""
     def set_cable_stiffness(self, cable: int, stiffness: float) -> None:
         """Cable `cable`'s segment stiffness, N/m (> 0)."""
+    def set_cable_damping(self, cable: int, damping: float) -> None:
+        """Spring cable `cable`'s dashpot coefficient, N s/m (>= 0)."""
     def time_factorization(self, repeats: int) -> list[float]:
         """Seconds of each of `repeats` bare numeric factorisations of the Hessian at the last
         equilibrium (the rest state before any solve): a benchmark diagnostic."""

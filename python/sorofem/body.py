@@ -155,9 +155,15 @@ class Body:
         self._forces = np.zeros((mesh.n_nodes, 3), dtype=np.float64)
         self._cables: list[Cable] = []
         # Per cable its command: ("actuation", alpha) for a spring chain, ("pull", m) or
-        # ("tension", N) for a tendon; and a spring chain's segment stiffness (NaN for a tendon).
+        # ("tension", N) for a tendon; and a spring chain's segment stiffness and dashpot (NaN
+        # for a tendon). Each solve hands them to the model, which is not rebuilt for them.
         self._commands: list[tuple[str, float]] = []
         self._stiffnesses: list[float] = []
+        self._dampings: list[float] = []
+        # The Cable objects' own (stiffness, damping) when last taken: a value changed on the
+        # Cable after it was added is taken at the next solve, not ignored (the latest change,
+        # on the Cable or through the body's setters, wins).
+        self._cable_values_taken: list[tuple[float, float]] = []
         self._obstacles: list[ObstaclePlacement] = []
         self._contact: dict[str, float | bool | None] = dict.fromkeys(CONTACT_SETTINGS) | {"self_contact": False}
         # The activation distance in force (from the core's check of the obstacles).
@@ -274,6 +280,8 @@ class Body:
         other._cables = list(self._cables)
         other._commands = list(self._commands)
         other._stiffnesses = list(self._stiffnesses)
+        other._dampings = list(self._dampings)
+        other._cable_values_taken = list(self._cable_values_taken)
         other._obstacles = list(self._obstacles)
         other._contact = dict(self._contact)
         other._dhat = self._dhat
@@ -357,7 +365,10 @@ class Body:
             raise InputError("cable: this Cable has already been added to the body")
         self._cables.append(cable)
         self._commands.append(cable.command)
-        self._stiffnesses.append(math.nan if cable.is_tendon else float(cable.stiffness))  # type: ignore[arg-type]
+        own = _spring_values(cable)
+        self._stiffnesses.append(own[0])
+        self._dampings.append(own[1])
+        self._cable_values_taken.append(own)
         return len(self._cables) - 1
 
     def _spring_index(self, cable: Cable | int, what: str) -> int:
@@ -425,7 +436,29 @@ class Body:
         :class:`sorofem.Cable` or its index (the :class:`~sorofem.Cable` object keeps its own
         ``stiffness``). Takes effect at the next solve without rebuilding the model."""
         index = self._spring_index(cable, "stiffness")
+        self._take_cable_values()
         self._stiffnesses[index] = positive_scalar(stiffness, "stiffness")
+
+    def set_cable_damping(self, cable: Cable | int, damping: float) -> None:
+        """Set the dashpot coefficient (N s/m, >= 0) of a spring cable of this body, given as
+        the :class:`sorofem.Cable` or its index: a damping force ``c dL/dt`` along each segment
+        in a simulation (statics do not see it). Takes effect at the next solve without
+        rebuilding the model; the :class:`~sorofem.Cable` object keeps its own ``damping``."""
+        index = self._spring_index(cable, "damping")
+        self._take_cable_values()
+        self._dampings[index] = real(damping, "damping", minimum=0.0, strict=False)
+
+    def _take_cable_values(self) -> None:
+        """Adopt each Cable's own stiffness or damping where it changed since last taken."""
+        for i, cable in enumerate(self._cables):
+            own, taken = _spring_values(cable), self._cable_values_taken[i]
+            if own == taken or cable.is_tendon:
+                continue
+            if own[0] != taken[0]:
+                self._stiffnesses[i] = own[0]
+            if own[1] != taken[1]:
+                self._dampings[i] = own[1]
+            self._cable_values_taken[i] = own
 
     @property
     def cables(self) -> tuple[Cable, ...]:
@@ -448,7 +481,15 @@ class Body:
     def cable_stiffnesses(self) -> list[float]:
         """Current segment stiffness of each cable, N/m (see :meth:`set_cable_stiffness`;
         NaN for a tendon)."""
+        self._take_cable_values()
         return list(self._stiffnesses)
+
+    @property
+    def cable_dampings(self) -> list[float]:
+        """Current dashpot coefficient of each cable, N s/m (see :meth:`set_cable_damping`;
+        NaN for a tendon)."""
+        self._take_cable_values()
+        return list(self._dampings)
 
     def cable_placements(self) -> list[list[CablePlacement]]:
         """Where each cable point ended up: per cable, one :class:`sorofem.cables.CablePlacement`
@@ -614,7 +655,8 @@ class Body:
         if self._model_contact[0] != contact:
             model.set_contact([o.to_core() for o in self._obstacles], **self._contact)
             self._model_contact[0] = contact
-        set_cable_values(model, self._commands, self._stiffnesses)
+        self._take_cable_values()
+        set_cable_values(model, self._commands, self._stiffnesses, self._dampings)
         return model
 
     #: Old private name of :meth:`core_model` (the benchmarks call it).
@@ -657,23 +699,34 @@ class Body:
 
 
 def _cable_definition(cable: Cable) -> tuple[Any, ...]:
-    """What the compiled model holds of ``cable`` (its points, routing and dashpot, not the
-    command or the stiffness a solve sets): a cable changed after a solve rebuilds the model
+    """What the compiled model holds of ``cable`` (its points and routing, not the command,
+    stiffness or dashpot a solve sets): a cable changed after a solve rebuilds the model
     instead of solving with the old one."""
     settings = cable.to_core()
     points = settings.pop("points")
-    for per_solve in ("actuation", "stiffness", "pull", "tension"):
+    for per_solve in ("actuation", "stiffness", "damping", "pull", "tension"):
         settings.pop(per_solve, None)
     return (np.asarray(points).tobytes(), *sorted(settings.items()))
 
 
-def set_cable_values(model: Any, commands: Sequence[tuple[str, float]], stiffnesses: Sequence[float]) -> None:
+def _spring_values(cable: Cable) -> tuple[float, float]:
+    """A spring cable's own (stiffness N/m, damping N s/m); NaN for a tendon."""
+    if cable.is_tendon:
+        return math.nan, math.nan
+    return float(cable.stiffness), float(cable.damping)  # type: ignore[arg-type]
+
+
+def set_cable_values(model: Any, commands: Sequence[tuple[str, float]], stiffnesses: Sequence[float],
+                     dampings: Sequence[float] | None = None) -> None:
     """Give the extension's ``model`` each cable's command (``("actuation", alpha)``,
     ``("pull", m)`` or ``("tension", N)``, as :attr:`Body.commands`) and each spring chain's
-    stiffness (N/m). Internal interface of :class:`Body` and the inverse problems."""
+    stiffness (N/m) and, when given, dashpot (N s/m). Internal interface of :class:`Body` and
+    the inverse problems."""
     for c, ((kind, value), stiffness) in enumerate(zip(commands, stiffnesses)):
         if kind == "actuation":
             model.set_actuation(c, float(value))
             model.set_cable_stiffness(c, float(stiffness))
+            if dampings is not None:
+                model.set_cable_damping(c, float(dampings[c]))
         else:
             model.set_tendon_command(c, kind, float(value))

@@ -576,7 +576,7 @@ def simulate(
     finally:
         bar.close()
         # The extension leaves the last step's commands in the model; the body's own stay in charge.
-        set_cable_values(model, body.commands, body.cable_stiffnesses)
+        set_cable_values(model, body.commands, body.cable_stiffnesses, body.cable_dampings)
     return Trajectory(body, dt, out, alphas, time.perf_counter() - start)
 
 

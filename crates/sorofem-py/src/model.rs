@@ -556,6 +556,12 @@ impl Model {
         guarded(py, || inner.set_cable_stiffness(cable, stiffness))
     }
 
+    /// Sets spring cable `cable`'s dashpot coefficient (N s/m).
+    fn set_cable_damping(&mut self, py: Python<'_>, cable: usize, damping: f64) -> PyResult<()> {
+        let inner = &mut self.inner;
+        guarded(py, || inner.set_cable_damping(cable, damping))
+    }
+
     /// Sets tendon `cable`'s command: `kind` "pull" (m) or "tension" (N).
     fn set_tendon_command(
         &mut self,

@@ -59,7 +59,7 @@ from ._analysis import PROFILE_CONDITION
 from ._control import control
 from ._control_dynamics import DYNAMICS_KEYS, ScheduleResult
 from ._estimate import TornHistoryWarning, estimate
-from ._estimate_dynamics import DAMPING_PARAMETERS, marker_tracks
+from ._estimate_dynamics import DAMPING_PARAMETERS, MOTION_PARAMETERS, marker_tracks
 from ._gradient import gradient
 from ._parameters import PARAMETERS, parameter_names
 from ._problem import DEFAULT_TOLERANCE
@@ -78,6 +78,7 @@ __all__ = [
     "estimate",
     "marker_tracks",
     "DAMPING_PARAMETERS",
+    "MOTION_PARAMETERS",
     "control",
     "GradientResult",
     "FitResult",

@@ -310,10 +310,12 @@ def estimate(
         tracks, ``[(time, Target), ...]`` with every time a frame ``k dt`` of the run
         (:func:`sorofem.inverse.marker_tracks` builds them from a ``(frames, markers, 3)``
         array); the residual is every track's misfit at its frame. ``params`` may name
-        ``"mass_damping"`` (alpha_M, 1/s) and ``"stiffness_damping"`` (beta_K, s) besides the
+        ``"mass_damping"`` (alpha_M, 1/s), ``"stiffness_damping"`` (beta_K, s) and
+        ``"cable_damping"`` (N s/m, the dashpot of the body's one spring cable) besides the
         scalar material parameters, ``density`` and ``cable_stiffness``; all are optimised in
-        log space, the damping's start is ``x0`` or ``dynamics["damping"]`` (> 0 for a fitted
-        one), which also holds the coefficient not fitted. Every trajectory is simulated by
+        log space, the Rayleigh coefficients' start is ``x0`` or ``dynamics["damping"]`` (> 0
+        for a fitted one), which also holds the coefficient not fitted; the dashpot's is ``x0``
+        or the cable's damping (:attr:`sorofem.Body.cable_dampings`). Every trajectory is simulated by
         full Newton to ``tolerance`` per step. ``"least-squares"`` takes its Jacobian, and
         every method its Gauss-Newton uncertainty, from the forward (tangent-linear)
         trajectory sensitivity (one extra solve per step and parameter with the step's

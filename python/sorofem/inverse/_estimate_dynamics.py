@@ -4,8 +4,9 @@ The data are marker tracks, ``[(time, Target), ...]`` (:func:`marker_tracks` bui
 an array of marker positions per frame); the model is the implicit Euler trajectory of
 :func:`sorofem.simulate` from the same initial state, every step solved by full Newton to a
 tight tolerance. The residual is every track's ``Target.residual`` at its frame, concatenated
-(m); the fit minimises ``1/2 |r|^2`` over the Rayleigh coefficients and, optionally, the
-material, ``density`` and ``cable_stiffness``, each optimised in log space.
+(m); the fit minimises ``1/2 |r|^2`` over the Rayleigh coefficients, a spring cable's dashpot
+``cable_damping`` and, optionally, the material, ``density`` and ``cable_stiffness``, each
+optimised in log space.
 
 Derivatives: ``method="least-squares"`` (Levenberg-Marquardt) takes the exact Jacobian
 ``dr/ds`` from the forward (tangent-linear) trajectory sensitivity of the extension
@@ -44,11 +45,15 @@ from ._problem import bind, fitted_material
 from ._trajectory import trajectory_gradient, warn_balanced_contact
 from .results import FitResult
 
-__all__ = ["estimate_dynamics", "marker_tracks", "DAMPING_PARAMETERS", "ESTIMATE_DYNAMICS_KEYS"]
+__all__ = ["estimate_dynamics", "marker_tracks", "DAMPING_PARAMETERS", "MOTION_PARAMETERS", "ESTIMATE_DYNAMICS_KEYS"]
 
 #: The Rayleigh coefficients a fit to motion may estimate: ``mass_damping`` alpha_M (1/s) and
 #: ``stiffness_damping`` beta_K (s), both optimised as their logarithm.
 DAMPING_PARAMETERS = ("mass_damping", "stiffness_damping")
+#: The parameters only a fit to motion estimates (statics do not see them): the Rayleigh
+#: coefficients and ``cable_damping``, the dashpot (N s/m) of the body's one spring cable
+#: (:meth:`sorofem.Body.set_cable_damping`). All are fitted as their logarithm.
+MOTION_PARAMETERS = (*DAMPING_PARAMETERS, "cable_damping")
 #: Keys of ``dynamics=``: those of :func:`sorofem.simulate` that define the recorded run.
 ESTIMATE_DYNAMICS_KEYS = ("dt", "steps", "actuation", "damping", "initial", "initial_velocity", "gravity",
                           "tolerance", "max_iterations")
@@ -124,8 +129,8 @@ def _tracks(target: Any, body: Body, dt: float, steps: int) -> list[tuple[int, f
 
 class DynamicParameters:
     """The fitted names of a fit to motion, all scalars, in the user's order: the Rayleigh
-    coefficients and the names :class:`Parameters` understands (material, ``density``,
-    ``cable_stiffness``), each its own block of the scaled vector ``s``."""
+    coefficients, ``cable_damping`` and the names :class:`Parameters` understands (material,
+    ``density``, ``cable_stiffness``), each its own block of the scaled vector ``s``."""
 
     def __init__(self, body: Body, names: str | Sequence[str], regions: Mapping[str, ArrayLike] | None,
                  damping: tuple[float, float]) -> None:
@@ -134,7 +139,7 @@ class DynamicParameters:
         if not isinstance(names, (list, tuple)) or not names:
             raise InputError(f"params: expected a list of parameter names, got {describe(names)}")
         model = body.material.model
-        allowed = (*DAMPING_PARAMETERS, *model.estimable(), "cable_stiffness")
+        allowed = (*MOTION_PARAMETERS, *model.estimable(), "cable_stiffness")
         fields = [n for n in model.estimable() if n.endswith("_field")]
         static_names = []
         for name in names:
@@ -147,15 +152,22 @@ class DynamicParameters:
             if kind in COMMAND_PARAMETERS or kind == "gravity":
                 raise InputError(f"params: {name!r} is not estimated from motion (the schedule is given by "
                                  "dynamics['actuation'], gravity by dynamics['gravity'])")
-            if kind not in allowed or kind in DAMPING_PARAMETERS and kind != name:
+            if kind not in allowed or kind in MOTION_PARAMETERS and kind != name:
                 known = [n for n in allowed if n not in fields]
                 raise InputError(f"params: unknown parameter {name!r} for a fit to motion; expected one of {known} "
                                  "(material ones optionally ':region')")
-            if name not in DAMPING_PARAMETERS:
+            if name not in MOTION_PARAMETERS:
                 static_names.append(name)
         if len(set(names)) != len(names):
             twice = next(n for n in names if list(names).count(n) > 1)
             raise InputError(f"params: {twice!r} given twice")
+        springs = [i for i, c in enumerate(body.cables) if not c.is_tendon]
+        if "cable_damping" in names and len(springs) != 1:
+            raise InputError(f"params: 'cable_damping' is a spring cable's dashpot, fitted as one scalar: it needs a "
+                             f"body with exactly one spring cable; this one has {len(springs)}")
+        #: The spring cable whose dashpot is fitted, and its coefficient in the body (N s/m).
+        self.dashpot_cable = springs[0] if "cable_damping" in names else None
+        self.cable_damping0 = body.cable_dampings[springs[0]] if "cable_damping" in names else 0.0
         self.names: list[str] = list(names)
         self.static = Parameters(body, static_names, regions) if static_names else None
         self.damping0 = damping
@@ -166,13 +178,13 @@ class DynamicParameters:
                                  "motion takes scalar parameters (a body with one spring cable)")
         empty = np.zeros(0, dtype=np.int64)
         self.blocks = [
-            Block(name, name, empty, empty, 1, LOG, i) if name in DAMPING_PARAMETERS
+            Block(name, name, empty, empty, 1, LOG, i) if name in MOTION_PARAMETERS
             else Block(name, by_name[name].kind, by_name[name].elements, by_name[name].cables, 1,
                        by_name[name].transform, i)
             for i, name in enumerate(self.names)
         ]
         self.size = len(self.names)
-        self.static_index = [i for i, n in enumerate(self.names) if n not in DAMPING_PARAMETERS]
+        self.static_index = [i for i, n in enumerate(self.names) if n not in MOTION_PARAMETERS]
 
     def current(self) -> NDArray[np.float64]:
         theta = np.zeros(self.size)
@@ -181,6 +193,8 @@ class DynamicParameters:
         for i, name in enumerate(self.names):
             if name in DAMPING_PARAMETERS:
                 theta[i] = self.damping0[DAMPING_PARAMETERS.index(name)]
+            elif name == "cable_damping":
+                theta[i] = self.cable_damping0
         return theta
 
     def from_user(self, values: Any, what: str) -> NDArray[np.float64]:
@@ -204,8 +218,9 @@ class DynamicParameters:
         for b in self.blocks:
             v = theta[b.offset]
             if not math.isfinite(v) or not bool(b.transform.contains(v)):
-                hint = (" (a damping coefficient is fitted as its logarithm: give a positive start in x0 or "
-                        "dynamics['damping'])" if b.name in DAMPING_PARAMETERS else "")
+                where = "the cable's damping" if b.name == "cable_damping" else "dynamics['damping']"
+                hint = (f" (a damping coefficient is fitted as its logarithm: give a positive start in x0 or {where})"
+                        if b.name in MOTION_PARAMETERS else "")
                 raise ParameterError(f"{what}: {b.name} must be {b.transform.domain()}, got {v:g}{hint}", b.name)
 
     def to_s(self, theta: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -243,7 +258,7 @@ class DynamicParameters:
                     continue
                 if isinstance(value, bool) or not isinstance(value, numbers.Real) or math.isnan(float(value)):
                     raise InputError(f"bounds: expected numbers or None for {b.name!r}, got {describe(value)}")
-                if b.name in DAMPING_PARAMETERS and float(value) < 0:
+                if b.name in MOTION_PARAMETERS and float(value) < 0:
                     raise ParameterError(f"bounds: {b.name!r} is a damping coefficient, >= 0; got the bound "
                                          f"{float(value):g}", b.name)
                 if b.transform.contains(float(value)):
@@ -260,17 +275,28 @@ class DynamicParameters:
         return values[0], values[1]
 
     def body(self, body: Body, theta: NDArray[np.float64]) -> Body:
-        """``body`` with the material, density and cable stiffnesses of theta (a copy that shares
-        its compiled model, or the body itself when none of those is fitted)."""
-        if self.static is None:
+        """``body`` with the material, density, cable stiffnesses and dashpot of theta (a copy
+        that shares its compiled model, or the body itself when none of those is fitted)."""
+        if self.static is None and self.dashpot_cable is None:
             return body
-        st = self.static.state(theta[self.static_index])
-        fitted = body.replace(material=fitted_material(body, st))
-        for b in self.static.blocks:
-            if b.kind == "cable_stiffness":
-                for c in b.cables:
-                    fitted.set_cable_stiffness(int(c), float(st.stiffness[c]))
+        if self.static is None:
+            fitted = body.replace()
+        else:
+            st = self.static.state(theta[self.static_index])
+            fitted = body.replace(material=fitted_material(body, st))
+            for b in self.static.blocks:
+                if b.kind == "cable_stiffness":
+                    for c in b.cables:
+                        fitted.set_cable_stiffness(int(c), float(st.stiffness[c]))
+        if self.dashpot_cable is not None:
+            fitted.set_cable_damping(self.dashpot_cable, float(theta[self.names.index("cable_damping")]))
         return fitted
+
+    def direction(self, name: str, n_cables: int) -> dict[str, Any]:
+        """The forward-sensitivity direction of a motion-only parameter (one unit of it)."""
+        if name == "cable_damping":
+            return {name: np.eye(n_cables)[self.dashpot_cable]}
+        return {name: 1.0}
 
 
 class DynamicProblem:
@@ -329,7 +355,8 @@ class DynamicProblem:
         p, run = self.params, self.run
         body = p.body(self.body, theta)
         static = iter(p.static.directions(theta[p.static_index]) if p.static is not None else [])
-        directions = [{name: 1.0} if name in DAMPING_PARAMETERS else next(static) for name in p.names]
+        directions = [p.direction(name, len(body.cables)) if name in MOTION_PARAMETERS else next(static)
+                      for name in p.names]
         n = body.mesh.n_nodes
         x0, v0 = _initial_state(run["initial"], run["initial_velocity"])
         mass_damping, stiffness_damping = p.damping(theta)
@@ -340,7 +367,7 @@ class DynamicProblem:
                 evaluate_schedule(body, run["actuation"], run["dt"], run["steps"]), directions, mass_damping,
                 stiffness_damping, x0, v0, run["tolerance"], run["max_iterations"])
         finally:
-            set_cable_values(model, body.commands, body.cable_stiffnesses)
+            set_cable_values(model, body.commands, body.cable_stiffnesses, body.cable_dampings)
         self.forward_solves += 1
         self.newton_iterations += int(np.sum(out["iterations"]))
         self._tick()

@@ -333,7 +333,7 @@ def trajectory_gradient(
             mass_damping, stiffness_damping, x0, v0, tol, iters, every,
         )
     finally:
-        set_cable_values(model, body.commands, body.cable_stiffnesses)
+        set_cable_values(model, body.commands, body.cable_stiffnesses, body.cable_dampings)
     gradient: dict[str, Any] = {}
     static_grad = p.as_dict(p.pullback(core_sensitivities(out["params"]), theta)) if p is not None else {}
     per_step = np.asarray(out["actuation"], dtype=np.float64).reshape(steps, len(body.cables))

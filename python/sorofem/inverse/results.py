@@ -366,7 +366,8 @@ class FitResult:
         try:
             p = model.parameter(kind)
         except KeyError:
-            return name, {"cable_stiffness": "N/m", "mass_damping": "1/s", "stiffness_damping": "s"}.get(kind, "")
+            return name, {"cable_stiffness": "N/m", "mass_damping": "1/s", "stiffness_damping": "s",
+                         "cable_damping": "N s/m"}.get(kind, "")
         return p.symbol + (f":{region}" if region else ""), p.units
 
     def summary(self) -> str:

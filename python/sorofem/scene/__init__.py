@@ -146,7 +146,8 @@ Schema
     params = ["shear_modulus", "lame_lambda"]   # names of the parameters to fit (sorofem.inverse.PARAMETERS); a
                                                 # material one may name a region, "shear_modulus:tip"; with
                                                 # [dynamics] also the Rayleigh coefficients mass_damping (1/s) and
-                                                # stiffness_damping (s), scalars only; required
+                                                # stiffness_damping (s) and the dashpot cable_damping (N s/m) of
+                                                # the one spring cable, scalars only; required
     x0 = [20e3, 200e3]         # initial values, one per parameter (an array for a field; > 0 for a damping
                                # coefficient); required
     bounds = [[1000, 1e6], [1000, 100e6]]   # one [lo, hi] per parameter

@@ -20,7 +20,7 @@ from typing import Any
 from .._validate import MAX_CABLE_DIVISIONS, MAX_STARTS, MAX_TIME_STEPS, Range
 from ..body import FORMULATIONS, PRESSURE_MASSES, VOLUMETRIC_MEASURES, Body
 from ..cables import CABLE_MODELS, OUTSIDE_MODES, Cable
-from ..inverse import DAMPING_PARAMETERS, parameter_names
+from ..inverse import MOTION_PARAMETERS, parameter_names
 from ..materials import DENSITY, MODELS, NEO_HOOKEAN, MaterialModel, Parameter
 from ..mesh import Mesh
 from ..plot import COLOR_FIELDS
@@ -469,7 +469,7 @@ _TARGET = Table(
 )
 
 #: Parameter names [estimate] accepts (sorofem.inverse's for every model), material ones optionally ":REGION".
-_PARAMETERS = tuple(dict.fromkeys(n for model in MODELS.values() for n in parameter_names(model))) + DAMPING_PARAMETERS
+_PARAMETERS = tuple(dict.fromkeys(n for model in MODELS.values() for n in parameter_names(model))) + MOTION_PARAMETERS
 _MATERIAL_PARAMETERS = tuple(dict.fromkeys(n for model in MODELS.values() for n in model.estimable()))
 _ESTIMATE = Table(
     {
@@ -478,7 +478,7 @@ _ESTIMATE = Table(
                          pattern_doc="a material one followed by ':REGION' (a named [[material.region]])"), 1),
             "names of the parameters to fit (sorofem.inverse.PARAMETERS); a material one may name a region, "
             "\"shear_modulus:tip\"; with [dynamics] also the Rayleigh coefficients mass_damping (1/s) and "
-            "stiffness_damping (s), scalars only",
+            "stiffness_damping (s) and the dashpot cable_damping (N s/m) of the one spring cable, scalars only",
             required=True, example=["shear_modulus", "lame_lambda"],
         ),
         "x0": Field(Array(Either((Number(), Array(Number(), 1))), 1),

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..body import Body
 from ..errors import InputError
-from ..inverse import DAMPING_PARAMETERS
+from ..inverse import MOTION_PARAMETERS
 from ..materials import MODELS
 from ..targets import Target
 from ._build import existing_file, observed_rest
@@ -139,10 +139,11 @@ def build_tracks(check: Checker, table: dict[str, Any], dynamics: dict[str, Any]
 
 
 def check_estimate(check: Checker, table: dict[str, Any], dynamics: dict[str, Any] | None) -> None:
-    """``[estimate]`` params that only a fit to motion takes (the Rayleigh coefficients) need
-    ``[dynamics]``; their starts are > 0 (they are fitted as logarithms), their bounds >= 0."""
+    """``[estimate]`` params that only a fit to motion takes (the Rayleigh coefficients and a
+    cable's dashpot) need ``[dynamics]``; their starts are > 0 (they are fitted as logarithms),
+    their bounds >= 0."""
     for i, name in enumerate(table["params"]):
-        if name not in DAMPING_PARAMETERS:
+        if name not in MOTION_PARAMETERS:
             continue
         if dynamics is None:
             raise check.error("estimate.params", f"{name!r} is fitted to a recorded motion: it needs a [dynamics] table "
@@ -205,7 +206,7 @@ def estimate_dynamics(check: Checker, dynamics: dict[str, Any], estimate: dict[s
                           "takes scalar parameters")
     if estimate["starts"]:
         raise check.error("estimate.starts", f"a fit to motion runs from x0 alone, got starts = {estimate['starts']}")
-    materials = [n for n in estimate["params"] if n not in DAMPING_PARAMETERS]
+    materials = [n for n in estimate["params"] if n not in MOTION_PARAMETERS]
     if dynamics["initial"] == "static" and materials:
         raise check.error("dynamics.initial", f"a fit of {materials[0]!r} to motion starts from rest (initial = "
                           "\"rest\"): the equilibrium of initial = \"static\" would change with the fitted values")

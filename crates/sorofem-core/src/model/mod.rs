@@ -343,6 +343,24 @@ impl Model {
         Ok(())
     }
 
+    /// Sets spring cable `cable`'s dashpot coefficient (N s/m, >= 0): the damping force
+    /// `c dL/dt` along each segment in a simulation (statics do not see it).
+    pub fn set_cable_damping(&mut self, cable: usize, damping: f64) -> Result<()> {
+        if !(damping >= 0.0 && damping.is_finite()) {
+            return Err(Error::invalid(
+                "damping",
+                "a finite dashpot coefficient >= 0 N s/m",
+                damping,
+            ));
+        }
+        let target = self.cable_mut(cable, "damping")?;
+        if target.damping != damping {
+            target.damping = damping;
+            self.last_state = None;
+        }
+        Ok(())
+    }
+
     /// Sets tendon `cable`'s command: a pull (m, shorter than its rest length) or a tension
     /// (N, >= 0). A tendon's tension from the last solve stays the next solve's starting
     /// multiplier (warm starts of a pull continuation).
