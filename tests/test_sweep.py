@@ -282,23 +282,29 @@ def test_api_result_and_markers(scene, tmp_path, client):
 
 
 def test_issue_21_batches_shrink_so_that_the_workers_finish_together():
-    """Speed (issue 21): big batches first (few tasks for the scheduler), small ones last (no
-    worker idles while another finishes a long batch); every case once, one group per batch."""
+    """Speed (issue 21): big batches first (few tasks: each costs the scheduler, the driver and a
+    worker a few ms of CPU), small ones last (no worker idles while another finishes a long
+    batch), in rounds of one batch per worker; every case once, one group per batch."""
     from sorofem.sweeps._run import MAX_BATCH, _batches
 
-    groups = {0: list(range(150)), 1: list(range(150, 400))}
-    todo = set(range(400)) - {3, 160}
+    # The benchmark's sweep, 200 cases on 2 workers: each batch a quarter of what is left when its round starts (at most
+    # MAX_BATCH); the third round takes the last 50 evenly, since a round of the smallest batches
+    # (200 / (8 x 2) -> 13) would leave fewer than another such round.
+    assert MAX_BATCH == 50
+    assert [len(b) for b in _batches({0: list(range(200))}, set(range(200)), 2)] == [50, 50, 25, 25, 25, 25]
+    groups = {0: list(range(60)), 1: list(range(60, 200))}
+    todo = set(range(200)) - {3, 100}
     batches = _batches(groups, todo, 2)
     sizes = [len(b) for b in batches]
     assert sorted(i for b in batches for i in b) == sorted(todo)
     assert all(set(b) <= set(groups[0]) or set(b) <= set(groups[1]) for b in batches)
-    assert sizes[0] == MAX_BATCH == max(sizes) and len(batches) <= 16
-    # Shrinking (but for the rest of a group) down to 1/8 of a worker's share of the sweep,
-    # 398 / (8 x 2) -> 25 cases.
-    second = [len(b) for b in batches if b[0] >= 150]
-    assert second == sorted(second, reverse=True) and second[0] == MAX_BATCH
-    assert min(sizes[:-1]) == 25 > sizes[-1]
-    assert [len(b) for b in _batches(groups, todo, 2, 64)] == [64, 64, 21, 64, 64, 64, 57]
+    # A batch cut short by the end of its group still counts in its round.
+    assert sizes == [50, 9, 35, 35, 18, 18, 17, 16]
+    # Large cases, few of them: down to one or two cases a batch.
+    assert [len(b) for b in _batches({0: list(range(24))}, set(range(24)), 2)] == [6, 6, 3, 3, 3, 3]
+    # A sweep with more cases than the cap allows in its first rounds: MAX_BATCH until the rounds shrink.
+    assert [len(b) for b in _batches({0: list(range(398))}, set(range(398)), 2)] == [50] * 6 + [49, 49]
+    assert [len(b) for b in _batches(groups, todo, 2, 64)] == [59, 64, 64, 11]
 
 
 def test_issue_21_the_local_cluster_runs_its_workers_without_profiler(client):

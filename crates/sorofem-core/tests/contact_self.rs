@@ -383,3 +383,61 @@ fn an_arm_sags_onto_its_own_body() {
     // The grown pattern served the second solve: no new analysis.
     assert_eq!(model.symbolic_analyses(), first_analyses);
 }
+
+/// The candidates kept along a bounded direction give the barrier of a fresh broad phase at
+/// every point of it (and off it the term runs the broad phase again): the upper arm moved
+/// down from 3 dhat above the lower arm to 1 dhat through it, the contact forces compared at
+/// points up to the step bound, where stencils are within dhat.
+#[test]
+fn candidates_kept_along_a_direction_give_the_barrier_of_a_fresh_broad_phase() {
+    let mesh = c_shape(SIZE, CELLS);
+    let dhat = 0.004;
+    let term = ContactTerm::try_new(
+        &mesh,
+        ContactSetup {
+            self_contact: true,
+            dhat: Some(dhat),
+            stiffness: Some(1e6),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let gap = UPPER_BOTTOM - LOWER_TOP;
+    let rest = mesh.rest_flat();
+    let minus =
+        |a: &[f64], b: &[f64]| -> Vec<f64> { a.iter().zip(b).map(|(x, y)| x - y).collect() };
+    let start = lowered(&mesh, gap - 3.0 * dhat);
+    let z0 = minus(&start, &rest);
+    let dz = minus(&lowered(&mesh, gap + dhat), &start);
+    let alpha = term.max_step(&z0, &dz, DEFAULT_MIN_SEPARATION);
+    assert!(alpha > 0.5 && alpha < 1.0, "step bound {alpha}");
+    let fresh = term.clone(); // a clone keeps no candidates
+    let at = |t: f64| -> Vec<f64> { z0.iter().zip(&dz).map(|(a, d)| a + t * d).collect() };
+    let mut active = 0.0_f64;
+    for t in [0.0, 0.25 * alpha, 0.5 * alpha, 0.99 * alpha] {
+        let z = at(t);
+        let kept = term.kept_candidates(&z);
+        assert!(
+            kept.is_some() && fresh.kept_candidates(&z).is_none(),
+            "t = {t}"
+        );
+        let (g, reference) = (term.full_gradient(&z), fresh.full_gradient(&z));
+        let scale = reference.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+        let error = g
+            .iter()
+            .zip(&reference)
+            .fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()));
+        println!(
+            "t = {t:.3}: {} kept candidates, |g| {scale:.3e} N, difference {error:.1e} N",
+            kept.unwrap()
+        );
+        assert!(error <= 1e-12 * scale, "t = {t}: {error} against {scale}");
+        active = active.max(scale);
+    }
+    assert!(active > 0.0, "no stencil within dhat along the direction");
+    // Off the direction by 1e-6 dhat: not kept, and the same forces as a fresh pass.
+    let mut off = at(0.5 * alpha);
+    off[3 * mesh.n_nodes() - 1] += 1e-6 * dhat;
+    assert!(term.kept_candidates(&off).is_none());
+    assert_eq!(term.full_gradient(&off), fresh.full_gradient(&off));
+}

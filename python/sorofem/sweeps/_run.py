@@ -39,12 +39,13 @@ __all__ = ["sweep", "SweepResult", "CONNECT_TIMEOUT", "local_cluster", "LOCAL_CL
 
 #: Seconds to wait for a scheduler given by address before giving up.
 CONNECT_TIMEOUT = 5.0
-#: The batches shrink as the sweep goes on (guided self-scheduling): each holds about
-#: 1 / (SHARE x workers) of the cases left, so that the first are large (few tasks for the
-#: scheduler) and the last small (the workers finish together, none waits on a long last batch) ...
+#: The batches shrink as the sweep goes on (factoring: rounds of one batch per worker, each
+#: batch 1 / (SHARE x workers) of the cases left when its round starts), so that the first are
+#: large (few tasks: each costs the scheduler, the driver and the worker a few ms of CPU) and
+#: the last small (the workers finish together, none waits on a long last batch) ...
 SHARE = 2
-#: ... none smaller than the cases / (MAX_BATCHES_PER_WORKER x workers) (each task costs the
-#: scheduler a few ms) ...
+#: ... none smaller than the cases / (MAX_BATCHES_PER_WORKER x workers), a round that would
+#: leave fewer cases than a round of those taking them all, evenly ...
 MAX_BATCHES_PER_WORKER = 8
 #: ... and none larger than this (how much an interruption can lose per worker).
 MAX_BATCH = 50
@@ -207,18 +208,25 @@ def _markers(markers: ArrayLike | None, probe: Scene, base: dict[str, Any]) -> n
 
 def _batches(groups: dict[int, list[int]], todo: set[int], workers: int, size: int | None = None) -> list[list[int]]:
     """The cases to solve, cut into batches of one group each, in the order they are sent: of
-    ``size`` cases, or without it shrinking from ``MAX_BATCH`` (see :data:`SHARE`)."""
+    ``size`` cases, or without it shrinking round by round from ``MAX_BATCH`` (see :data:`SHARE`)."""
     left = len(todo)
     smallest = max(1, math.ceil(left / (MAX_BATCHES_PER_WORKER * workers)))
-    out = []
+    out: list[list[int]] = []
+    n = size or 0
+    in_round = 0
     for members in groups.values():
         pending = [i for i in members if i in todo]
         k = 0
         while k < len(pending):
-            n = size or min(MAX_BATCH, max(smallest, math.ceil(left / (SHARE * workers))))
+            if size is None and in_round == 0:
+                n = min(MAX_BATCH, max(smallest, math.ceil(left / (SHARE * workers))))
+                if left - workers * n < workers * smallest:
+                    n = min(MAX_BATCH, math.ceil(left / workers))
+                in_round = workers
             out.append(pending[k:k + n])
             k += n
             left -= len(out[-1])
+            in_round -= 1
     return out
 
 
@@ -284,8 +292,9 @@ def sweep(
         The address of a running Dask scheduler (``tcp://HOST:PORT``) to connect to instead.
     batch_size
         Cases sent to a worker at once. Default: batches that shrink as the sweep goes on,
-        each about half a worker's share of the cases left (at most 50, at least 1/8 of a
-        worker's share of the sweep), so that the workers finish together.
+        in rounds of one per worker, each half a worker's share of the cases left when its
+        round starts (at most 50, at least 1/8 of a worker's share of the sweep), so that the
+        workers finish together.
     force
         Replace the sweep ``out`` holds if it is another one (by default that is refused).
     progress
@@ -354,10 +363,14 @@ def sweep(
 
     # The cluster first: a scheduler that cannot be reached leaves no folder behind.
     with _client(client, scheduler, workers) as dask:
-        if same:
-            store.clean_temporaries()
-        else:
-            store.clear()
+        n_threads = sum(dask.nthreads().values())
+        if n_threads == 0:
+            say(f"no worker is connected to the scheduler {dask.scheduler.address} yet: the cases wait for one")
+        n_threads = max(n_threads, 1)
+        batches = _batches(groups, todo, n_threads, batch_size)
+        sizes = sorted({len(b) for b in batches})
+        result.workers = n_threads
+        if not same:
             manifest = {
                 "sorofem_version": __version__,
                 "fingerprint": fingerprint,
@@ -374,28 +387,29 @@ def sweep(
                 "columns": [name for name, _ in columns],
                 "runs": [],
             }
-            store.create(manifest, key_columns, table.columns(), columns)
-            if save:
-                store.create_fields(save, table.n, probe.mesh.n_nodes)
         assert manifest is not None
-        n_threads = sum(dask.nthreads().values())
-        if n_threads == 0:
-            say(f"no worker is connected to the scheduler {dask.scheduler.address} yet: the cases wait for one")
-        n_threads = max(n_threads, 1)
-        batches = _batches(groups, todo, n_threads, batch_size)
-        sizes = sorted({len(b) for b in batches})
         run = len(manifest["runs"])
         manifest["runs"].append({"started": datetime.now(timezone.utc).isoformat(timespec="seconds"),
                                  "cases_before": len(done), "workers": n_threads, "batches": len(batches),
                                  "batch_size": sizes[-1], "scheduler": dask.scheduler.address if dask.scheduler else None})
-        store.write_manifest(manifest)
-        result.workers = n_threads
-        resumed = f"; resuming: {len(done)} already in {store.root}, {len(todo)} to solve" if done else ""
-        cut = f"of {sizes[0]}" if len(sizes) == 1 else f"of {sizes[-1]} down to {sizes[0]}"
-        say(f"{path.name}: {table.n} cases ({keys}) in {len(groups)} group(s) sharing a model, "
-            f"{n_threads} worker(s), {len(batches)} batches {cut} cases{resumed}")
+
+        # Called by _execute once the batches are sent: the workers start solving meanwhile.
+        def write_folder() -> None:
+            if same:
+                store.clean_temporaries()
+                store.write_manifest(manifest)
+            else:
+                store.clear()
+                store.create(manifest, key_columns, table.columns(), columns)
+                if save:
+                    store.create_fields(save, table.n, probe.mesh.n_nodes)
+            resumed = f"; resuming: {len(done)} already in {store.root}, {len(todo)} to solve" if done else ""
+            cut = f"of {sizes[0]}" if len(sizes) == 1 else f"of {sizes[-1]} down to {sizes[0]}"
+            say(f"{path.name}: {table.n} cases ({keys}) in {len(groups)} group(s) sharing a model, "
+                f"{n_threads} worker(s), {len(batches)} batches {cut} cases{resumed}")
+
         _execute(dask, store, table, path, text, batches, points, save, len(probe.cables), columns, run, result,
-                 progress)
+                 progress, write_folder)
     result.time = time.perf_counter() - start
     return result
 
@@ -423,8 +437,10 @@ def _interruptible() -> Iterator[threading.Event]:
 
 def _execute(dask: Any, store: Store, table: Cases, path: Path, text: str, batches: list[list[int]],
              points: np.ndarray, save: tuple[str, ...], n_cables: int, columns: list[tuple[str, str]], run: int,
-             result: SweepResult, progress: bool | None) -> None:
-    """Submit the batches, write each as it finishes, keep the counts of ``result``."""
+             result: SweepResult, progress: bool | None, write_folder: Callable[[], None]) -> None:
+    """Submit the batches, then ``write_folder`` (the record and the case table: the workers
+    solve meanwhile, nothing is written before it), then write each batch as it finishes and
+    keep the counts of ``result``."""
     keys = tuple(k.text for k in table.keys)
     marker_points = tuple(tuple(float(v) for v in p) for p in points)
     total = sum(len(m) for m in batches)
@@ -444,6 +460,7 @@ def _execute(dask: Any, store: Store, table: Cases, path: Path, text: str, batch
             for b, (future, members) in enumerate(zip(submitted, batches)):
                 futures[future] = (b, members)
                 future.add_done_callback(finished.put)
+            write_folder()
             while futures:
                 if stop.is_set():
                     raise KeyboardInterrupt

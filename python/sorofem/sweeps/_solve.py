@@ -10,8 +10,10 @@ per worker, not once per case).
 
 from __future__ import annotations
 
+import functools
 import math
 import time
+import tomllib
 import traceback
 from collections import OrderedDict
 from dataclasses import dataclass, field
@@ -78,6 +80,15 @@ class Outcome:
 def clear_cache() -> None:
     """Forget the scenes this process keeps (their compiled models are freed)."""
     _CACHE.clear()
+    _parsed.cache_clear()
+
+
+@functools.lru_cache(maxsize=CACHE_SIZE)
+def _parsed(scene_text: str, keys: tuple[str, ...]) -> tuple[tuple[Key, ...], dict[str, Any]]:
+    """The keys and the scene's tables of a sweep, read once per process rather than once per
+    batch (the keys' checks walk the scene spec: about a millisecond a batch). The tables are
+    shared by every case: :meth:`Key.apply` copies what it changes."""
+    return tuple(parse_key(text) for text in keys), tomllib.loads(scene_text)
 
 
 def tip_node(scene: Scene) -> int:
@@ -92,7 +103,7 @@ def tip_node(scene: Scene) -> int:
     return int(np.argmax(distance))
 
 
-def _scene(batch: Batch, keys: list[Key], values: tuple[Any, ...], base: dict[str, Any]) -> tuple[Scene, _Kept]:
+def _scene(batch: Batch, keys: tuple[Key, ...], values: tuple[Any, ...], base: dict[str, Any]) -> tuple[Scene, _Kept]:
     """The case's scene, built like a kept scene of the same structure when there is one."""
     data = base
     for key, value in zip(keys, values):
@@ -175,10 +186,7 @@ def solve_batch(batch: Batch) -> list[Outcome]:
     Runs on a Dask worker (any process: the batch is plain data). Progress lines of the solves
     are switched off: only the sweep draws one.
     """
-    import tomllib
-
-    keys = [parse_key(text) for text in batch.keys]
-    base = tomllib.loads(batch.scene_text)
+    keys, base = _parsed(batch.scene_text, batch.keys)
     out = []
     with progress_default(False):
         for case, values in batch.cases:

@@ -24,6 +24,7 @@ pub mod friction;
 pub mod obstacle;
 pub mod potential;
 mod psd;
+mod segment;
 pub mod self_contact;
 mod stencil;
 pub mod term;

@@ -24,6 +24,7 @@ use super::distance::Vec3;
 use super::friction::{lag_friction, FrictionStencil};
 use super::obstacle::Obstacle;
 use super::potential::{candidate_squared_distance, BarrierPotential};
+use super::segment::SegmentCache;
 use super::stencil::{FreeScatter, Stencil};
 use crate::assembly::Assembler;
 use crate::energy::HessianMode;
@@ -127,6 +128,8 @@ pub struct ContactTerm {
     mean_edge: f64,
     /// Check every accepted iterate for intersections in full (see [`ContactTerm::set_audit`]).
     audit: bool,
+    /// The barrier's candidates along the last direction [`ContactTerm::max_step`] bounded.
+    segment: SegmentCache,
 }
 
 impl ContactTerm {
@@ -210,6 +213,7 @@ impl ContactTerm {
             bbox_diagonal: 0.0,
             mean_edge,
             audit: false,
+            segment: SegmentCache::default(),
         };
         term.set_time(0.0);
         term.bbox_diagonal = term.scene_diagonal();
@@ -356,6 +360,7 @@ impl ContactTerm {
             .map(|k| self.translation_at(k, t))
             .collect();
         self.mesh = self.rest.moved(&self.translations);
+        self.segment.clear();
     }
 
     /// Obstacle `k`'s translation (m) at time `t` (s).
@@ -406,7 +411,8 @@ impl ContactTerm {
     /// The barrier stencils within `dhat` at positions `x`, with their Hessians when asked.
     /// `None` when a stencil touches or intersects.
     fn barrier_stencils(&self, x: &[Vec3], hessian: Option<HessianMode>) -> Option<Vec<Stencil>> {
-        let found = candidates(&self.mesh, x, self.dhat);
+        let found = (self.segment.candidates_at(x, self.dhat))
+            .unwrap_or_else(|| candidates(&self.mesh, x, self.dhat));
         let potential = self.barrier();
         let dhat2 = self.dhat * self.dhat;
         let stencils: Vec<Stencil> = found
@@ -549,7 +555,8 @@ impl ContactTerm {
 
     /// The largest step `alpha` in [0, 1] along the full-DOF direction `dz` from `z` that keeps
     /// every stencil apart (additive CCD, analytic for planes and spheres), each at least about
-    /// `eta` times its starting distance.
+    /// `eta` times its starting distance. Keeps the barrier's candidates along `dz` for the
+    /// evaluations on it (see [`super::segment`]).
     pub fn max_step(&self, z: &[f64], dz: &[f64], eta: f64) -> f64 {
         let x0 = self.positions(z);
         let n_body = self.mesh.n_body();
@@ -564,7 +571,17 @@ impl ContactTerm {
             .collect();
         let x1: Vec<Vec3> = x0.iter().zip(&dx).map(|(a, b)| a + b).collect();
         let swept = swept_candidates(&self.mesh, &x0, &x1, 0.0);
+        self.segment.set(&self.mesh, &x0, &dx, self.dhat);
         max_step(&self.mesh, &swept, &x0, &dx, eta)
+    }
+
+    /// How many candidates an evaluation at the full DOF vector `z` takes from the direction
+    /// [`ContactTerm::max_step`] last bounded (`None`: `z` is off it, and the evaluation runs
+    /// the broad phase). A diagnostic.
+    pub fn kept_candidates(&self, z: &[f64]) -> Option<usize> {
+        self.segment
+            .candidates_at(&self.positions(z), self.dhat)
+            .map(|found| found.len())
     }
 
     /// The fraction in [0, 1] of the obstacles' motion from where they are now to where their
