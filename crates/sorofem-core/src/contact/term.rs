@@ -555,8 +555,8 @@ impl ContactTerm {
 
     /// The largest step `alpha` in [0, 1] along the full-DOF direction `dz` from `z` that keeps
     /// every stencil apart (additive CCD, analytic for planes and spheres), each at least about
-    /// `eta` times its starting distance. Keeps the barrier's candidates along `dz` for the
-    /// evaluations on it (see [`super::segment`]).
+    /// `eta` times its starting distance. With self-contact, keeps the barrier's candidates
+    /// along `dz` for the evaluations on it (see [`super::segment`]).
     pub fn max_step(&self, z: &[f64], dz: &[f64], eta: f64) -> f64 {
         let x0 = self.positions(z);
         let n_body = self.mesh.n_body();
@@ -571,7 +571,12 @@ impl ContactTerm {
             .collect();
         let x1: Vec<Vec3> = x0.iter().zip(&dx).map(|(a, b)| a + b).collect();
         let swept = swept_candidates(&self.mesh, &x0, &x1, 0.0);
-        self.segment.set(&self.mesh, &x0, &dx, self.dhat);
+        // Against obstacles alone the broad phase is cheap (few, mostly analytic candidates)
+        // and keeping them costs more than it saves; a self-contact surface pairs tens of
+        // thousands of neighbouring primitives at every evaluation.
+        if self.self_contact() {
+            self.segment.set(&self.mesh, &x0, &dx, self.dhat);
+        }
         max_step(&self.mesh, &swept, &x0, &dx, eta)
     }
 
