@@ -50,13 +50,16 @@ MAX_BATCHES_PER_WORKER = 8
 #: ... and none larger than this (how much an interruption can lose per worker).
 MAX_BATCH = 50
 #: Dask settings of :func:`local_cluster`: each worker's statistical profiler samples the running
-#: solve every 10 ms and every Dask server (scheduler, nannies, workers) checks its event loop
-#: every 20 ms, CPU taken from the solves on the same cores. Only the dashboard's profile and
-#: system pages lose detail.
+#: solve every 10 ms, every Dask server (scheduler, nannies, workers) checks its event loop
+#: every 20 ms, and each worker and its nanny read the worker's memory every 100 ms (half of
+#: an idle cluster's CPU time), CPU taken from the solves on the same cores. Only the
+#: dashboard's profile and system pages lose detail, and a worker outgrowing its memory limit
+#: is paused or restarted up to a second later.
 LOCAL_CLUSTER_CONFIG = {
     "distributed.worker.profile.enabled": False,
     "distributed.admin.tick.interval": "1s",
     "distributed.admin.system-monitor.interval": "5s",
+    "distributed.worker.memory.monitor-interval": "1s",
 }
 #: Seconds between two looks for a Ctrl-C while no batch finishes (a finished batch wakes the
 #: driver at once).
