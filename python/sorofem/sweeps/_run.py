@@ -45,7 +45,9 @@ CONNECT_TIMEOUT = 5.0
 #: the last small (the workers finish together, none waits on a long last batch) ...
 SHARE = 2
 #: ... none smaller than the cases / (MAX_BATCHES_PER_WORKER x workers), a round that would
-#: leave fewer cases than a round of those taking them all, evenly ...
+#: leave fewer cases than two rounds of those taking them all, evenly: Dask hands a
+#: single-thread worker its next task while it still runs one, so the last two rounds are
+#: handed out about together and the finer split of the last one would only add tasks ...
 MAX_BATCHES_PER_WORKER = 8
 #: ... and none larger than this (how much an interruption can lose per worker).
 MAX_BATCH = 50
@@ -223,7 +225,7 @@ def _batches(groups: dict[int, list[int]], todo: set[int], workers: int, size: i
         while k < len(pending):
             if size is None and in_round == 0:
                 n = min(MAX_BATCH, max(smallest, math.ceil(left / (SHARE * workers))))
-                if left - workers * n < workers * smallest:
+                if left - workers * n < 2 * workers * smallest:
                     n = min(MAX_BATCH, math.ceil(left / workers))
                 in_round = workers
             out.append(pending[k:k + n])
