@@ -78,7 +78,10 @@ class Key:
         another kind, value by value, so that the error names the first bad one."""
         spec = self.field.spec
         if isinstance(spec, Number) and all(type(v) is float or type(v) is int for v in values):
-            x = np.array(values, dtype=np.float64)
+            try:
+                x = np.array(values, dtype=np.float64)
+            except OverflowError:  # an integer beyond float64: checked alone below
+                x = np.array([np.nan])
             if np.all(np.isfinite(x)) and np.all(spec.range.contains(x)):
                 return x.tolist()
         return [self.check(v, scene, where(i)) for i, v in enumerate(values)]
