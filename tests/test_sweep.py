@@ -288,10 +288,10 @@ def test_issue_21_batches_shrink_so_that_the_workers_finish_together():
     from sorofem.sweeps._run import MAX_BATCH, _batches
 
     # The benchmark's sweep, 200 cases on 2 workers: each batch a quarter of what is left when its round starts (at most
-    # MAX_BATCH); the third round takes the last 50 evenly, since a round of the smallest batches
-    # (200 / (8 x 2) -> 13) would leave fewer than another such round.
+    # MAX_BATCH); the second round takes the last 100 evenly, since a round of quarters (25) would leave fewer than
+    # two rounds of the smallest batches (200 / (8 x 2) -> 13).
     assert MAX_BATCH == 50
-    assert [len(b) for b in _batches({0: list(range(200))}, set(range(200)), 2)] == [50, 50, 25, 25, 25, 25]
+    assert [len(b) for b in _batches({0: list(range(200))}, set(range(200)), 2)] == [50, 50, 50, 50]
     groups = {0: list(range(60)), 1: list(range(60, 200))}
     todo = set(range(200)) - {3, 100}
     batches = _batches(groups, todo, 2)
@@ -299,9 +299,12 @@ def test_issue_21_batches_shrink_so_that_the_workers_finish_together():
     assert sorted(i for b in batches for i in b) == sorted(todo)
     assert all(set(b) <= set(groups[0]) or set(b) <= set(groups[1]) for b in batches)
     # A batch cut short by the end of its group still counts in its round.
-    assert sizes == [50, 9, 35, 35, 18, 18, 17, 16]
-    # Large cases, few of them: down to one or two cases a batch.
-    assert [len(b) for b in _batches({0: list(range(24))}, set(range(24)), 2)] == [6, 6, 3, 3, 3, 3]
+    assert sizes == [50, 9, 35, 35, 35, 34]
+    # Large cases, few of them: a quarter of the sweep a batch, then the rest evenly.
+    assert [len(b) for b in _batches({0: list(range(24))}, set(range(24)), 2)] == [6, 6, 6, 6]
+    # Many cases on many workers: rounds that shrink from the cap to the last even round.
+    sizes = [len(b) for b in _batches({0: list(range(1000))}, set(range(1000)), 8)]
+    assert sizes == [50] * 8 + [38] * 8 + [37] * 8
     # A sweep with more cases than the cap allows in its first rounds: MAX_BATCH until the rounds shrink.
     assert [len(b) for b in _batches({0: list(range(398))}, set(range(398)), 2)] == [50] * 6 + [49, 49]
     assert [len(b) for b in _batches(groups, todo, 2, 64)] == [59, 64, 64, 11]

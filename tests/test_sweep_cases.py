@@ -116,6 +116,24 @@ def test_a_csv_table_of_cases(scene, tmp_path):
         Cases.build(scene, table=table, grid={"material.youngs_modulus": [1e4]})
 
 
+def test_a_column_of_numbers_is_checked_at_once_as_one_by_one(scene):
+    key = parse_key("material.poisson_ratio")
+    values = [0, 0.1, 0.25, 0.45, 0.499]
+    checked = key.check_column(values, scene, lambda i: f"value {i}")
+    assert checked == [key.check(v, scene, "one") for v in values] == [0.0, 0.1, 0.25, 0.45, 0.499]
+    assert all(type(v) is float for v in checked)
+    # A bad value is named by its place, as the check of that value alone names it.
+    for bad, message in ((0.5, "expected a number >= 0 and < 0.5, got 0.5"), (-0.1, "got -0.1"),
+                         (float("nan"), "expected a finite number, got nan"),
+                         (float("inf"), "expected a finite number, got inf"), (True, "got a boolean true"), ("0.3", "got .*0.3")):
+        with pytest.raises(InputError, match=rf"material.poisson_ratio \(value 3\): .*{message}"):
+            key.check_column([0.1, 0.2, 0.3, bad, 0.6], scene, lambda i: f"value {i}")
+    gravity = parse_key("loads.gravity")
+    assert gravity.check_column([[0, 0, -9.81], [0, -1, 0]], scene, str) == [[0.0, 0.0, -9.81], [0.0, -1.0, 0.0]]
+    with pytest.raises(InputError, match=r"\(grid value 2\): expected a number >= 0 and < 0.5, got 0.7"):
+        Cases.build(scene, grid={"material.poisson_ratio": np.array([0.3, 0.4, 0.7])})
+
+
 def _batch(scene, keys, rows, **extra):
     return Batch(str(scene), scene.read_text(), tuple(keys), tuple(enumerate(rows)), **extra)
 

@@ -249,9 +249,9 @@ def cluster_estimate(rows: dict[str, Row], array_dir: Path) -> str:
         )
     lines.append("")
     lines.append("The batch size `B` is the mean of the 2-worker sweep's default batches (cases / batches). "
-                 "The default cuts a sweep into rounds of one batch per worker, about 3 rounds, more where the "
+                 "The default cuts a sweep into rounds of one batch per worker, 2 or 3 rounds, more where the "
                  "50-case cap binds (each batch half a worker's share of the cases left, down to 1/8 of its share "
-                 "of the sweep), so on 100 workers the batches for the same cases are ~50x smaller: a sweep of "
+                 "of the sweep, the last round the rest), so on 100 workers the batches for the same cases are ~50x smaller: a sweep of "
                  "small cases should have at least ~300 x B cases, or a larger `--batch-size`, to keep the driver "
                  "from being the limit.")
     return "\n".join(lines) + "\n"

@@ -216,10 +216,10 @@ from __future__ import annotations
 
 from ._keys import SCENE, TOP_KEYS, json_schema, schema_text
 from ._scene import PER_SOLVE_CABLE_KEYS, Scene, structure_key
-from ._spec import Checker, Field
+from ._spec import Checker, Field, Number, Table, Tables
 
-__all__ = ["Scene", "json_schema", "schema_text", "TOP_KEYS", "SCENE", "Checker", "Field", "structure_key",
-           "PER_SOLVE_CABLE_KEYS"]
+__all__ = ["Scene", "json_schema", "schema_text", "TOP_KEYS", "SCENE", "Checker", "Field", "Number", "Table",
+           "Tables", "structure_key", "PER_SOLVE_CABLE_KEYS"]
 
 # Documented (and pickled) as members of this package, whichever private module holds them.
 for _public in (Scene, json_schema, schema_text):

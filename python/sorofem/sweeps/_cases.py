@@ -25,12 +25,12 @@ import re
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
 from ..errors import InputError, SceneError
-from ..scene import PER_SOLVE_CABLE_KEYS, SCENE, Checker, Field
+from ..scene import PER_SOLVE_CABLE_KEYS, SCENE, Checker, Field, Number, Table, Tables
 
 __all__ = ["Key", "Cases", "parse_key", "parse_values", "read_scene", "missing_extra"]
 
@@ -71,6 +71,20 @@ class Key:
             return self.field.spec.check(Checker(scene, ""), value, self.text)
         except SceneError as exc:
             raise InputError(f"{self.text} ({where}): {exc.message}") from None
+
+    def check_column(self, values: Sequence[Any], scene: Path, where: Callable[[int], str]) -> list[Any]:
+        """Every value checked as :meth:`check` does (``where(i)`` names value ``i``). A column of
+        plain numbers for a number key is checked at once; a column with a bad value, or of
+        another kind, value by value, so that the error names the first bad one."""
+        spec = self.field.spec
+        if isinstance(spec, Number) and all(type(v) is float or type(v) is int for v in values):
+            try:
+                x = np.array(values, dtype=np.float64)
+            except OverflowError:  # an integer beyond float64: checked alone below
+                x = np.array([np.nan])
+            if np.all(np.isfinite(x)) and np.all(spec.range.contains(x)):
+                return x.tolist()
+        return [self.check(v, scene, where(i)) for i, v in enumerate(values)]
 
     def apply(self, data: dict[str, Any], value: Any, where: str) -> dict[str, Any]:
         """A scene's tables (as :func:`tomllib.loads` returns them) with the value set: the
@@ -164,12 +178,11 @@ def missing_extra(what: str, exc: ImportError) -> InputError:
 
 
 def _is_table(spec: Any) -> bool:
-    return spec.schema().get("type") == "object"
+    return isinstance(spec, Table)
 
 
 def _is_tables(spec: Any) -> bool:
-    schema = spec.schema()
-    return schema.get("type") == "array" and schema.get("items", {}).get("type") == "object"
+    return isinstance(spec, Tables)
 
 
 def parse_values(key: Key, text: str, where: str) -> list[Any]:
@@ -305,7 +318,7 @@ class Cases:
             values = grid[key.text] if key.text in grid else grid[next(n for n in grid if n.strip() == key.text)]
             if isinstance(values, (str, bytes)) or not isinstance(values, Sequence | np.ndarray):
                 values = [values]
-            values = [key.check(_plain(v), scene, f"grid value {i}") for i, v in enumerate(values)]
+            values = key.check_column([_plain(v) for v in values], scene, lambda i: f"grid value {i}")
             grid_columns.append(values)
         bounds = []
         for key in keys[len(grid):]:
@@ -358,8 +371,8 @@ class Cases:
             raise InputError(f"the sweep has no case ({source} has no row)")
         values = []
         for key, raw in zip(keys, columns.values()):
-            values.append([key.check(_cell(key, v, f"cases: {source} row {i}"), scene, f"{source} row {i}")
-                           for i, v in enumerate(raw)])
+            cells = [_cell(key, v, f"cases: {source} row {i}") for i, v in enumerate(raw)]
+            values.append(key.check_column(cells, scene, lambda i: f"{source} row {i}"))
         return cls(scene, tuple(keys), tuple(values), {"table": source})
 
 

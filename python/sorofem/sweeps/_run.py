@@ -45,18 +45,23 @@ CONNECT_TIMEOUT = 5.0
 #: the last small (the workers finish together, none waits on a long last batch) ...
 SHARE = 2
 #: ... none smaller than the cases / (MAX_BATCHES_PER_WORKER x workers), a round that would
-#: leave fewer cases than a round of those taking them all, evenly ...
+#: leave fewer cases than two rounds of those taking them all, evenly: Dask hands a
+#: single-thread worker its next task while it still runs one, so the last two rounds are
+#: handed out about together and the finer split of the last one would only add tasks ...
 MAX_BATCHES_PER_WORKER = 8
 #: ... and none larger than this (how much an interruption can lose per worker).
 MAX_BATCH = 50
 #: Dask settings of :func:`local_cluster`: each worker's statistical profiler samples the running
-#: solve every 10 ms and every Dask server (scheduler, nannies, workers) checks its event loop
-#: every 20 ms, CPU taken from the solves on the same cores. Only the dashboard's profile and
-#: system pages lose detail.
+#: solve every 10 ms, every Dask server (scheduler, nannies, workers) checks its event loop
+#: every 20 ms, and each worker and its nanny read the worker's memory every 100 ms (half of
+#: an idle cluster's CPU time), CPU taken from the solves on the same cores. Only the
+#: dashboard's profile and system pages lose detail, and a worker outgrowing its memory limit
+#: is paused or restarted up to a second later.
 LOCAL_CLUSTER_CONFIG = {
     "distributed.worker.profile.enabled": False,
     "distributed.admin.tick.interval": "1s",
     "distributed.admin.system-monitor.interval": "5s",
+    "distributed.worker.memory.monitor-interval": "1s",
 }
 #: Seconds between two looks for a Ctrl-C while no batch finishes (a finished batch wakes the
 #: driver at once).
@@ -220,7 +225,7 @@ def _batches(groups: dict[int, list[int]], todo: set[int], workers: int, size: i
         while k < len(pending):
             if size is None and in_round == 0:
                 n = min(MAX_BATCH, max(smallest, math.ceil(left / (SHARE * workers))))
-                if left - workers * n < workers * smallest:
+                if left - workers * n < 2 * workers * smallest:
                     n = min(MAX_BATCH, math.ceil(left / workers))
                 in_round = workers
             out.append(pending[k:k + n])
