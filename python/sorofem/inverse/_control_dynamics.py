@@ -376,7 +376,7 @@ def control_schedule(
         o = options
         trajectory = simulate(body, o.dt, o.steps, actuation=schedule, gravity=gravity, damping=o.damping,
                               initial=o.initial, initial_velocity=o.initial_velocity, tolerance=solve_tolerance,
-                              max_iterations=max_iterations, method="newton", progress=False)
+                              max_iterations=max_iterations, method="modified", progress=False)
     finally:
         bar.close()
     distances = problem.distances(trajectory.positions)

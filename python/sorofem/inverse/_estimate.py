@@ -316,7 +316,7 @@ def estimate(
         log space, the Rayleigh coefficients' start is ``x0`` or ``dynamics["damping"]`` (> 0
         for a fitted one), which also holds the coefficient not fitted; the dashpot's is ``x0``
         or the cable's damping (:attr:`sorofem.Body.cable_dampings`). Every trajectory is simulated by
-        full Newton to ``tolerance`` per step. ``"least-squares"`` takes its Jacobian, and
+        modified Newton to ``tolerance`` per step. ``"least-squares"`` takes its Jacobian, and
         every method its Gauss-Newton uncertainty, from the forward (tangent-linear)
         trajectory sensitivity (one extra solve per step and parameter with the step's
         factorised Hessian); ``"l-bfgs-b"`` follows the adjoint gradient

@@ -2,9 +2,9 @@
 
 The data are marker tracks, ``[(time, Target), ...]`` (:func:`marker_tracks` builds them from
 an array of marker positions per frame); the model is the implicit Euler trajectory of
-:func:`sorofem.simulate` from the same initial state, every step solved by full Newton to a
-tight tolerance. The residual is every track's ``Target.residual`` at its frame, concatenated
-(m); the fit minimises ``1/2 |r|^2`` over the Rayleigh coefficients, a spring cable's dashpot
+:func:`sorofem.simulate` from the same initial state, every step solved by modified Newton (the
+default step method) to a tight tolerance. The residual is every track's ``Target.residual`` at
+its frame, concatenated (m); the fit minimises ``1/2 |r|^2`` over the Rayleigh coefficients, a spring cable's dashpot
 ``cable_damping`` and, optionally, the material, ``density`` and ``cable_stiffness``, each
 optimised in log space.
 
@@ -323,7 +323,7 @@ class DynamicProblem:
         traj = simulate(self.params.body(self.body, theta), run["dt"], run["steps"], actuation=run["actuation"],
                         gravity=run["gravity"], damping=self.params.damping(theta), initial=run["initial"],
                         initial_velocity=run["initial_velocity"], tolerance=run["tolerance"],
-                        max_iterations=run["max_iterations"], method="newton", progress=False)
+                        max_iterations=run["max_iterations"], method="modified", progress=False)
         self.forward_solves += 1
         self.newton_iterations += int(traj.iterations.sum())
         self._tick()

@@ -71,7 +71,7 @@ impl StepMethod {
 /// The residual must fall at least this much per modified-Newton iteration, or the next one
 /// refactorises. Lower refactorises more often (each costs an assembly and a factorisation,
 /// several kept-factor iterations' worth); higher lets slow linear convergence run on.
-pub(super) const MAX_CONTRACTION: f64 = 0.25;
+pub(crate) const MAX_CONTRACTION: f64 = 0.25;
 
 /// The settings of a simulation besides its loads, schedule, damping and start.
 #[derive(Clone, Debug)]

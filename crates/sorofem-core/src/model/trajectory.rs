@@ -301,22 +301,9 @@ impl Model {
         rest.iter().zip(z).map(|(x, u)| x + u).collect()
     }
 
-    /// One step solved to the tolerance, unsplit, with a factorisation of its own; its Newton
+    /// One step solved to the tolerance, unsplit, by `setup`'s method, keeping the
+    /// factorisation in `reuse` across the steps of a run (modified Newton); its Newton
     /// iterations.
-    fn converged_step(
-        &mut self,
-        setup: &StepSetup,
-        state: &mut StepState,
-        dt: f64,
-        s: usize,
-        commands: &[f64],
-    ) -> Result<usize> {
-        let mut reuse = FactorReuse::new(MAX_CONTRACTION);
-        self.converged_step_reusing(setup, state, dt, s, commands, &mut reuse)
-    }
-
-    /// [`Self::converged_step`] by `setup`'s method, keeping the factorisation in `reuse`
-    /// across the steps of a run (modified Newton).
     fn converged_step_reusing(
         &mut self,
         setup: &StepSetup,

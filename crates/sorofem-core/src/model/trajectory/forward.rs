@@ -19,7 +19,8 @@
 use super::{RecordedPositions, StepEnd};
 use crate::energy::HessianMode;
 use crate::error::{Error, Result};
-use crate::model::dynamics::{Damping, StepMethod, StepSetup, StepState};
+use crate::model::dynamics::{Damping, StepMethod, StepSetup, StepState, MAX_CONTRACTION};
+use crate::model::system::FactorReuse;
 use crate::model::{Loads, Model};
 use crate::newton::NewtonOptions;
 use crate::sensitivity::{add_derivative_along, dot, schur_solve, ParamLayout, ParamVector};
@@ -48,7 +49,7 @@ struct Tangent {
 }
 
 impl Model {
-    /// The simulation of [`Model::trajectory_gradient`] (every step by full Newton to
+    /// The simulation of [`Model::trajectory_gradient`] (every step by modified Newton to
     /// `newton.tolerance`) and, per direction, the change of every frame's node positions
     /// along it: `[direction][frame]`, 3 n values each (m per unit of the direction; frame 0
     /// is all zeros).
@@ -69,7 +70,7 @@ impl Model {
         directions: &[TrajectoryDirection],
     ) -> Result<(RecordedPositions, Vec<Vec<Vec<f64>>>)> {
         let setup =
-            self.differentiable_setup(loads, dt, actuation, damping, newton, StepMethod::Newton)?;
+            self.differentiable_setup(loads, dt, actuation, damping, newton, StepMethod::Modified)?;
         let layout = {
             let load_terms = self.terms.loads(loads);
             ParamLayout::new(&self.terms.parameterised(&load_terms))
@@ -111,9 +112,11 @@ impl Model {
             let (mut state, _) =
                 self.start_of_run(&setup, initial_positions, initial_velocities)?;
             record.positions.push(self.node_positions(&state.z));
+            let mut reuse = FactorReuse::new(MAX_CONTRACTION);
             for (s, commands) in actuation.iter().enumerate() {
                 let start = state.clone();
-                let iterations = self.converged_step(&setup, &mut state, dt, s, commands)?;
+                let iterations =
+                    self.converged_step_reusing(&setup, &mut state, dt, s, commands, &mut reuse)?;
                 record.iterations.push(iterations);
                 record.positions.push(self.node_positions(&state.z));
                 record.balanced_contact_steps += usize::from(self.balanced_in_contact(&state.z));
