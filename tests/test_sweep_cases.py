@@ -134,6 +134,21 @@ def test_a_column_of_numbers_is_checked_at_once_as_one_by_one(scene):
         Cases.build(scene, grid={"material.poisson_ratio": np.array([0.3, 0.4, 0.7])})
 
 
+def test_an_integer_beyond_float64_is_named_not_a_traceback(scene, tmp_path):
+    """10**400 as a number: the scene's check and the column's name the key and the value's
+    size (before, a bare OverflowError from float())."""
+    huge = 10**400
+    key = parse_key("material.youngs_modulus")
+    with pytest.raises(InputError, match=r"material.youngs_modulus \(value 1\): expected a finite number, got an "
+                                         r"integer of 401 digits"):
+        key.check_column([5e4, huge], scene, lambda i: f"value {i}")
+    path = tmp_path / "huge.toml"
+    path.write_text(SCENE.replace("youngs_modulus = 66e3", f"youngs_modulus = {huge}"), encoding="utf-8")
+    with pytest.raises(sf.SceneError, match="material.youngs_modulus.*integer of 401 digits") as info:
+        sf.Scene.load(path)
+    assert info.value.key == "material.youngs_modulus"
+
+
 def _batch(scene, keys, rows, **extra):
     return Batch(str(scene), scene.read_text(), tuple(keys), tuple(enumerate(rows)), **extra)
 

@@ -93,7 +93,10 @@ class Number(Spec):
     def check(self, c: "Checker", value: Any, key: str, at: str = "") -> float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise c.fail(key, at, f"expected {self.what()}, got {shown_value(value)}")
-        x = float(value)
+        try:
+            x = float(value)
+        except OverflowError:  # an integer beyond float64's range
+            raise c.fail(key, at, f"expected a finite number, got an integer of {len(str(abs(value)))} digits") from None
         if not math.isfinite(x):
             raise c.fail(key, at, f"expected a finite number, got {x}")
         bound = self.range.violated(x)
