@@ -205,7 +205,7 @@ def _write_cost(out: Path, table: Any, size: int) -> float:
 
 
 case("sorofem/sweep-cantilever-0.4m-8x2x2-200", "sweep", quick=True)(
-    lambda: sweep_throughput(CANTILEVER, 200, 40e3, 100e3))
+    lambda: sweep_throughput(CANTILEVER, 200, 40e3, 100e3, repeats=5))
 
 
 @case("sorofem/sweep-hammerbot-24", "sweep")
