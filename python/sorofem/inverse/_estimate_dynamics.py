@@ -4,9 +4,9 @@ The data are marker tracks, ``[(time, Target), ...]`` (:func:`marker_tracks` bui
 an array of marker positions per frame); the model is the implicit Euler trajectory of
 :func:`sorofem.simulate` from the same initial state, every step solved by modified Newton (the
 default step method) to a tight tolerance. The residual is every track's ``Target.residual`` at
-its frame, concatenated (m); the fit minimises ``1/2 |r|^2`` over the Rayleigh coefficients, a spring cable's dashpot
-``cable_damping`` and, optionally, the material, ``density`` and ``cable_stiffness``, each
-optimised in log space.
+its frame, concatenated (m); the fit minimises ``1/2 |r|^2`` over the Rayleigh coefficients, a
+spring cable's dashpot ``cable_damping`` and, optionally, the material, ``density`` and
+``cable_stiffness``, each optimised in log space.
 
 Derivatives: ``method="least-squares"`` (Levenberg-Marquardt) takes the exact Jacobian
 ``dr/ds`` from the forward (tangent-linear) trajectory sensitivity of the extension

@@ -173,9 +173,9 @@ impl Model {
                     tensions: self.tendon_tensions(),
                 });
             }
-            record.iterations.push(
-                self.converged_step_reusing(&setup, &mut state, dt, s, commands, &mut reuse)?,
-            );
+            record
+                .iterations
+                .push(self.converged_step(&setup, &mut state, dt, s, commands, &mut reuse)?);
             record.positions.push(self.node_positions(&state.z));
             barrier_stiffness.push(self.barrier_stiffness());
             record.balanced_contact_steps += usize::from(self.balanced_in_contact(&state.z));
@@ -304,7 +304,7 @@ impl Model {
     /// One step solved to the tolerance, unsplit, by `setup`'s method, keeping the
     /// factorisation in `reuse` across the steps of a run (modified Newton); its Newton
     /// iterations.
-    fn converged_step_reusing(
+    fn converged_step(
         &mut self,
         setup: &StepSetup,
         state: &mut StepState,
@@ -392,7 +392,7 @@ impl Model {
             let mut states = vec![(state.clone(), checkpoint.tensions.clone())];
             let mut reuse = FactorReuse::new(MAX_CONTRACTION);
             for (s, commands) in actuation.iter().enumerate().take(last - 1).skip(first) {
-                self.converged_step_reusing(setup, &mut state, dt, s, commands, &mut reuse)?;
+                self.converged_step(setup, &mut state, dt, s, commands, &mut reuse)?;
                 states.push((state.clone(), self.tendon_tensions()));
             }
             states.push((next.state.clone(), next.tensions.clone()));

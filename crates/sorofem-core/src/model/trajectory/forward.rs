@@ -116,7 +116,7 @@ impl Model {
             for (s, commands) in actuation.iter().enumerate() {
                 let start = state.clone();
                 let iterations =
-                    self.converged_step_reusing(&setup, &mut state, dt, s, commands, &mut reuse)?;
+                    self.converged_step(&setup, &mut state, dt, s, commands, &mut reuse)?;
                 record.iterations.push(iterations);
                 record.positions.push(self.node_positions(&state.z));
                 record.balanced_contact_steps += usize::from(self.balanced_in_contact(&state.z));
