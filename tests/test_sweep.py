@@ -371,6 +371,8 @@ BAD = [
     (["--grid", "output.vtu=true"], "[output] is not swept"),
     (["--sample", "material.youngs_modulus=1e3:2e3"], "the number of samples is needed"),
     (["--sample", "material.youngs_modulus=2e3:1e3", "--samples", "3"], "expected finite bounds lo < hi"),
+    (["--sample", "material.youngs_modulus=1e3:2e3", "--samples", "3", "--seed", "-1"],
+     "seed: expected an integer from 0 to 9223372036854775807, got -1"),
     (["--grid", "mesh.file=missing.vtu"], "mesh file not found"),
     (["--grid", "material.shear_modulus=1e4"], "expected exactly one of"),
     ([], "the sweep has no case"),

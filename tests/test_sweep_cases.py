@@ -149,6 +149,23 @@ def test_an_integer_beyond_float64_is_named_not_a_traceback(scene, tmp_path):
     assert info.value.key == "material.youngs_modulus"
 
 
+
+def test_python_arguments_of_other_types_are_named_errors_or_taken_as_meant(scene, tmp_path):
+    """What the command line cannot pass but Python can: a key that is not a string, a NumPy
+    count, a negative or huge seed (before, an AttributeError, a TypeError from the sweep's JSON
+    record and a ValueError from NumPy), and one field name given as a string."""
+    with pytest.raises(InputError, match="grid: expected a dotted scene key .* got int 3"):
+        Cases.build(scene, grid={3: [1.0]})
+    cases = Cases.build(scene, sample={"material.youngs_modulus": (1e4, 3e4)}, samples=np.int64(4))
+    assert cases.n == 4 and type(cases.origin["samples"]) is int
+    for seed in (-1, 2**64, 1.5):
+        with pytest.raises(sf.ParameterError, match="seed: expected an integer from 0 to 9223372036854775807"):
+            Cases.build(scene, sample={"material.youngs_modulus": (1e4, 3e4)}, samples=2, seed=seed)
+    # One name as a string is that name (not its letters); the check still runs before any cluster.
+    with pytest.raises(InputError, match="save: unknown field 'velocity'"):
+        sf.sweep(scene, tmp_path / "out", grid={"material.youngs_modulus": [5e4]}, save="velocity")
+    assert not (tmp_path / "out").exists()
+
 def _batch(scene, keys, rows, **extra):
     return Batch(str(scene), scene.read_text(), tuple(keys), tuple(enumerate(rows)), **extra)
 

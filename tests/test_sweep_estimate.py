@@ -31,6 +31,22 @@ def test_a_body_pickles_without_its_compiled_model():
     assert np.array_equal(before.positions, after.positions)
 
 
+
+@pytest.mark.parametrize("client", ["tcp://127.0.0.1:8786", object()], ids=["an address", "an object"])
+def test_a_client_that_is_not_one_is_named(client, tmp_path):
+    """Not a Client (an address belongs in ``scheduler=`` of a sweep): a named error before any
+    solve, not an AttributeError from deep inside."""
+    target = sf.Target.nodes([0], np.zeros((1, 3)))
+    with pytest.raises(sf.ParameterError, match="client: expected a dask.distributed.Client, got "):
+        sf.estimate(_body(), target, params=["shear_modulus"], starts=2, client=client, gravity=G)
+    scene = tmp_path / "beam.toml"
+    scene.write_text('[mesh]\nbox = { size = [0.4, 0.1, 0.1], cells = [4, 1, 1] }\n[material]\n'
+                     'youngs_modulus = 66e3\npoisson_ratio = 0.45\n[[fixed]]\nbox = { min = [-1e-9, -1, -1], '
+                     'max = [1e-9, 1, 1] }\n', encoding="utf-8")
+    with pytest.raises(sf.ParameterError, match="client: expected a dask.distributed.Client, got "):
+        sf.sweep(scene, tmp_path / "out", grid={"material.youngs_modulus": [5e4]}, client=client)
+    assert not (tmp_path / "out").exists()
+
 def test_starts_on_a_cluster_give_the_same_fit(tmp_path):
     from dask.distributed import Client
 

@@ -156,6 +156,18 @@ def count(value: Any, name: str, minimum: int, maximum: int) -> int:
     return value
 
 
+
+def dask_client(value: Any, name: str = "client") -> Any:
+    """``value`` if it is a ``dask.distributed.Client`` (a :class:`ParameterError` naming
+    ``name`` otherwise: anything else would fail later with an ``AttributeError``)."""
+    try:
+        from dask.distributed import Client
+    except ImportError:  # no Dask, so no client either
+        Client = None
+    if Client is None or not isinstance(value, Client):
+        raise ParameterError(f"{name}: expected a dask.distributed.Client, got {describe(value)}", name)
+    return value
+
 def describe(value: Any) -> str:
     """A value for an error message: ``an array of shape (3,) and dtype int64``, ``str 'abc'``."""
     if isinstance(value, np.ndarray):

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .._files import check_path, write_text
-from .._validate import MAX_EVALUATIONS, MAX_STARTS, boolean, count, describe, non_negative, positive_scalar
+from .._validate import MAX_EVALUATIONS, MAX_STARTS, boolean, count, dask_client, describe, non_negative, positive_scalar
 from ..errors import InputError
 from ..io import json_text
 from ..progress import Progress
@@ -371,6 +371,7 @@ def estimate(
     xtol, ftol = positive_scalar(xtol, "xtol"), positive_scalar(ftol, "ftol")
     regularization = non_negative(regularization, "regularization")
     seed = count(seed, "seed", 0, 2**63 - 1)
+    client = None if client is None else dask_client(client)
     verbose, resume = boolean(verbose, "verbose"), boolean(resume, "resume")
     if starts is not None and not isinstance(starts, (list, tuple)):
         starts = count(starts, "starts", 0, MAX_STARTS)

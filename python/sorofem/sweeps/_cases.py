@@ -29,6 +29,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
+from .._validate import count
 from ..errors import InputError, SceneError
 from ..scene import PER_SOLVE_CABLE_KEYS, SCENE, Checker, Field, Number, Table, Tables
 
@@ -132,6 +133,9 @@ class Key:
 
 def parse_key(text: str, where: str = "key") -> Key:
     """The :class:`Key` of a dotted scene key, or an :class:`InputError` saying what is wrong."""
+    if not isinstance(text, str):
+        raise InputError(f"{where}: expected a dotted scene key such as material.youngs_modulus (a string), "
+                         f"got {type(text).__name__} {text!r}")
     text = text.strip()
     parts: list[tuple[str, int | None]] = []
     spec: Any = SCENE
@@ -302,8 +306,12 @@ class Cases:
         if samples is not None and (isinstance(samples, bool) or not isinstance(samples, (int, np.integer))
                                     or samples < 1):
             raise InputError(f"samples: expected an integer >= 1, got {samples!r}")
+        if samples is not None:
+            samples = int(samples)  # a NumPy integer would not go into the sweep's JSON record
         if samples is not None and not sample:
             raise InputError("samples: given without any sample key=lo:hi to draw")
+        # NumPy's generators take any non-negative integer; the bound is that of sf.estimate's seed.
+        seed = count(seed, "seed", 0, 2**63 - 1)
         keys: list[Key] = []
         for name in list(grid) + list(sample):
             key = parse_key(name, "grid" if name in grid else "sample")

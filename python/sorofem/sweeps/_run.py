@@ -26,6 +26,7 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .._validate import dask_client
 from .._version import __version__
 from ..errors import InputError, SceneError
 from ..progress import Progress
@@ -134,7 +135,7 @@ def _client(client: Any, scheduler: str | None, workers: int | None) -> Iterator
     if client is not None:
         if scheduler is not None or workers is not None:
             raise InputError("client: give a client, a scheduler address or a number of workers, not several")
-        yield client
+        yield dask_client(client)
         return
     try:
         from dask.distributed import Client
@@ -282,8 +283,8 @@ def sweep(
         Instead of grid and sample: a table of cases, a CSV or Parquet file (one column per
         key) or a mapping key -> column.
     save
-        Full fields to keep per case in ``fields.zarr``: ``"displacement"`` (the final one
-        for a dynamic scene), ``(n_cases, n_nodes, 3)`` m.
+        Full fields to keep per case in ``fields.zarr``, one name or several:
+        ``"displacement"`` (the final one for a dynamic scene), ``(n_cases, n_nodes, 3)`` m.
     markers
         Rest points ``(k, 3)`` (m, inside the mesh) whose deformed positions are collected
         as ``marker[i].x`` .. ``marker[i].z``; default: the scene's ``[target]`` nodes or
@@ -328,7 +329,7 @@ def sweep(
     start = time.perf_counter()
     path, text, base = read_scene(scene)
     table = Cases.build(path, grid=grid, sample=sample, samples=samples, seed=seed, table=cases)
-    save = tuple(dict.fromkeys(save))
+    save = tuple(dict.fromkeys((save,) if isinstance(save, str) else save))
     for name in save:
         if name not in FIELDS:
             raise InputError(f"save: unknown field {name!r} (expected one of {', '.join(FIELDS)})")
