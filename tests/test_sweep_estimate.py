@@ -71,6 +71,31 @@ def test_starts_on_a_cluster_give_the_same_fit(tmp_path):
     assert [e["start"] for e in lines] == sorted(e["start"] for e in lines) and {e["start"] for e in lines} == {0, 1, 2, 3}
 
 
+
+def test_scenarios_of_one_start_on_a_cluster_give_the_same_fit():
+    """One start, three load cases: each evaluation solves the scenarios on the workers side by
+    side, each warm-started from the driver's last equilibrium of it, so the fit is the one of
+    the loop here, bit for bit."""
+    from dask.distributed import Client
+
+    truth = sf.NeoHookean(youngs_modulus=66e3, poisson_ratio=0.45, density=1080)
+    scenarios = []
+    for gravity in [(0, 0, -9.81), (0, -9.81, 0), (0, 0, 9.81)]:
+        goal = sf.solve_static(_body(truth.shear_modulus, truth.lame_lambda), gravity, tolerance=1e-12).positions
+        scenarios.append({"gravity": gravity, "target": sf.Target.nodes(np.arange(goal.shape[0]), goal)})
+    args = dict(params=["shear_modulus", "lame_lambda"], x0=[20e3, 0.2e6], bounds=[(10e3, 60e3), (0.1e6, 1e6)],
+                scenarios=scenarios)
+    here = sf.estimate(_body(), None, **args)
+    with sf.sweeps.local_cluster(2) as cluster, Client(cluster, set_as_default=False) as client:
+        there = sf.estimate(_body(), None, **args, client=client)
+        # Each worker built the problem once for the fit and keeps at most a couple.
+        kept = client.run(lambda: len(__import__("sorofem.inverse._problem", fromlist=["_BUILT"])._BUILT))
+    assert there.params == here.params and there.loss == here.loss
+    assert there.params["shear_modulus"] == pytest.approx(truth.shear_modulus, rel=1e-6)
+    assert (there.forward_solves, there.newton_iterations) == (here.forward_solves, here.newton_iterations)
+    assert np.array_equal(there.uncertainty.covariance, here.uncertainty.covariance)
+    assert set(kept.values()) <= {0, 1} and sum(kept.values()) >= 1
+
 def _finger(youngs_modulus: float) -> tuple[sf.Body, sf.Plane]:
     """A 100 x 20 x 20 mm finger clamped at x = 0, its tendon pulled 4 mm, pressing on a
     frictionless table 4 mm under its tip."""

@@ -24,7 +24,7 @@ from ._analysis import profile as profile_along
 from ._estimate_dynamics import estimate_dynamics
 from ._optimizers import Recorder, bound_sides, levenberg_marquardt, scipy_minimize, uncertainty
 from ._parameters import Parameters
-from ._problem import DEFAULT_TOLERANCE, Problem, final_results, fitted_material
+from ._problem import DEFAULT_TOLERANCE, Problem, ProblemSpec, RemoteScenarios, final_results, fitted_material
 from ._problem import scenarios as make_scenarios
 from .results import FitResult
 
@@ -260,6 +260,9 @@ def estimate(
         the first start if no solve fixed it yet); the final evaluation runs here.
         ``verbose`` lines are not printed for remote starts; the history file is written
         here as starts finish.
+        With one start and several ``scenarios``, each evaluation solves the scenarios on
+        its workers side by side instead, each warm-started from its last equilibrium here
+        (the same fit, bit for bit).
     max_evaluations
         Budget of objective evaluations per start (each is one solve per scenario), from 1 to
         100,000 (a documented limit).
@@ -426,6 +429,11 @@ def estimate(
     bar = Progress(desc=f"estimate ({method})", unit="solves", enabled=progress)
     problem.progress = bar
     try:
+        if client is not None and len(start_points) == 1 and len(scs) > 1:
+            # As with the starts, the barrier stiffness the first solve would fix travels with the body.
+            problem.fix_contact_stiffness(np.clip(p.to_s(start_points[0]), lo, hi))
+            problem.remote = RemoteScenarios(client, ProblemSpec(body, target, params, regions, scenarios, gravity,
+                                                                 solve))
         if client is not None and len(start_points) > 1:
             runs = _remote_starts(client, start_points, first_start, history_file, bar, problem, (
                 body, target, params, regions, scenarios, gravity, solve, regularization, method, lo, hi,

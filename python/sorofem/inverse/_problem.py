@@ -4,6 +4,10 @@ Jacobian (forward sensitivities or adjoints) or gradient."""
 
 from __future__ import annotations
 
+import pickle
+import threading
+import uuid
+from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
@@ -22,7 +26,8 @@ from ..static import StaticResult, solve_static
 from ..targets import BoundContactForce, BoundTarget, Target
 from ._parameters import COMMAND_PARAMETERS, Parameters, State
 
-__all__ = ["Scenario", "scenarios", "bind", "Problem", "fitted_material", "final_results", "DEFAULT_TOLERANCE"]
+__all__ = ["Scenario", "scenarios", "bind", "Problem", "ProblemSpec", "RemoteScenarios", "fitted_material",
+           "final_results", "DEFAULT_TOLERANCE"]
 
 #: Solve options a scenario may carry besides gravity, actuation and target.
 _SOLVE_KEYS = ("tolerance", "max_iterations", "load_steps")
@@ -110,6 +115,9 @@ class Problem:
         self.n_data = sum(sc.target.n_residuals for sc in scenarios)
         #: Progress line ticked after every forward solve (None: no progress reporting).
         self.progress: Progress | None = None
+        #: Where the scenarios are evaluated side by side (a Dask cluster, see
+        #: ``sorofem.inverse._estimate``); None: here, one after the other.
+        self.remote: Any = None
 
     def _tick(self) -> None:
         if self.progress is not None:
@@ -154,31 +162,17 @@ class Problem:
         """``(r, extra)``: extra is the Jacobian dr/ds (``want="jacobian"``), the gradient of
         ``1/2 |r|^2`` w.r.t. s (``"gradient"``) or None."""
         p = self.params
-        theta = p.from_s(s)
-        st = p.state(theta)
-        dts = p.dtheta_ds(s)
         self.evaluations += 1
-        rs, blocks = [], []
+        if self.remote is not None:
+            terms = self.remote.scenario_terms(self, s, want)
+        else:
+            terms = [self.scenario_terms(k, s, want) for k in range(len(self.scenarios))]
+        rs = [r for r, _ in terms]
+        blocks = [extra for _, extra in terms] if want == "jacobian" else []
         grad = np.zeros(p.size)
-        for sc in self.scenarios:
-            x = self._solve(sc, st)
-            r = sc.target.residual(x)
-            rs.append(r)
-            if want == "jacobian":
-                Jx = sc.target.jacobian(x)
-                if p.size <= len(r):
-                    cols = []
-                    for d in p.directions(theta):
-                        dx = np.asarray(self.model.forward(d)["dx"]).reshape(-1)
-                        cols.append(Jx @ dx)
-                    J = np.column_stack(cols) if cols else np.zeros((len(r), 0))
-                else:
-                    dense = Jx.toarray()
-                    J = np.vstack([p.pullback(self.model.adjoint(row.reshape(-1, 3)), theta) for row in dense])
-                blocks.append(J * dts[None, :])
-            elif want == "gradient":
-                g = (sc.target.jacobian(x).T @ r).reshape(-1, 3)
-                grad += p.pullback(self.model.adjoint(g), theta) * dts
+        if want == "gradient":
+            for _, part in terms:
+                grad += part
         if self.reg is not None:
             rs.append(self.reg @ s)
             if want == "jacobian":
@@ -191,6 +185,34 @@ class Problem:
         if want == "gradient":
             return r_all, grad
         return r_all, None
+
+    def scenario_terms(self, k: int, s: NDArray[np.float64], want: str) -> tuple[NDArray[np.float64], Any]:
+        """Scenario ``k``'s residual at ``s`` (its solve warm-started from ``initial``, which it
+        then updates) and its share of ``extra`` (see :meth:`evaluate`): its rows of the Jacobian,
+        or its term of the gradient."""
+        p = self.params
+        theta = p.from_s(s)
+        st = p.state(theta)
+        dts = p.dtheta_ds(s)
+        sc = self.scenarios[k]
+        x = self._solve(sc, st)
+        r = sc.target.residual(x)
+        if want == "jacobian":
+            Jx = sc.target.jacobian(x)
+            if p.size <= len(r):
+                cols = []
+                for d in p.directions(theta):
+                    dx = np.asarray(self.model.forward(d)["dx"]).reshape(-1)
+                    cols.append(Jx @ dx)
+                J = np.column_stack(cols) if cols else np.zeros((len(r), 0))
+            else:
+                dense = Jx.toarray()
+                J = np.vstack([p.pullback(self.model.adjoint(row.reshape(-1, 3)), theta) for row in dense])
+            return r, J * dts[None, :]
+        if want == "gradient":
+            g = (sc.target.jacobian(x).T @ r).reshape(-1, 3)
+            return r, p.pullback(self.model.adjoint(g), theta) * dts
+        return r, None
 
     def fix_contact_stiffness(self, s: NDArray[np.float64]) -> None:
         """Fix the barrier stiffness, which a model with contact takes at its first solve from
@@ -211,6 +233,84 @@ class Problem:
     def rms(self, r: NDArray[np.float64]) -> float:
         data = r[: self.n_data]
         return float(np.sqrt(data @ data / max(self.n_data // 3, 1)))
+
+
+
+@dataclass(frozen=True)
+class ProblemSpec:
+    """What builds an inverse problem (without its regulariser) again where a Dask worker
+    evaluates it: the arguments of the fit, the body travelling without its compiled model."""
+
+    body: Any
+    target: Any
+    params: Any
+    regions: Any
+    scenarios: Any
+    gravity: Any
+    solve: SolveOptions
+
+    def build(self) -> Problem:
+        return Problem(self.body, Parameters(self.body, self.params, self.regions),
+                       scenarios(self.body, self.target, self.scenarios, self.gravity, self.solve))
+
+
+#: The problems a worker has built, by fit, each with the lock its evaluations take (a worker
+#: of several threads may run two scenarios of one fit at once; they share its model). A
+#: worker serves the fits of one client at a time, so a couple are kept.
+_BUILT: "OrderedDict[str, tuple[Problem, threading.Lock]]" = OrderedDict()
+_BUILT_LOCK = threading.Lock()
+_KEPT_PROBLEMS = 2
+
+
+def _scenario_terms_on_worker(spec: bytes, fit: str, k: int, initial: NDArray[np.float64] | None,
+                              s: NDArray[np.float64], want: str) -> tuple[Any, ...]:
+    """:meth:`Problem.scenario_terms` of scenario ``k`` where a Dask worker runs it, warm-started
+    from the driver's ``initial``: its terms, its new equilibrium and the solves it took. ``spec``
+    is the pickled :class:`ProblemSpec`, read at the fit's first task on this worker."""
+    with _BUILT_LOCK:
+        built = _BUILT.pop(fit, None)
+        if built is None:
+            built = (pickle.loads(spec).build(), threading.Lock())
+        _BUILT[fit] = built
+        while len(_BUILT) > _KEPT_PROBLEMS:
+            _BUILT.popitem(last=False)
+    problem, lock = built
+    with lock:
+        sc = problem.scenarios[k]
+        sc.initial = initial
+        solves, iterations = problem.forward_solves, problem.newton_iterations
+        r, extra = problem.scenario_terms(k, s, want)
+        return r, extra, sc.initial, problem.forward_solves - solves, problem.newton_iterations - iterations
+
+
+class RemoteScenarios:
+    """The scenarios of each evaluation of a :class:`Problem` solved side by side on the workers
+    of a Dask ``client``. Each one is warm-started from the equilibrium the driver keeps for it,
+    so the evaluations are those of the driver's own loop, bit for bit, whichever worker solves
+    them. The body (its barrier stiffness fixed first, see :meth:`Problem.fix_contact_stiffness`)
+    goes with every task, pickled once here: a worker builds the problem at the fit's first task
+    it runs and keeps it. (Scattered once instead, the body would be a dependency of every task,
+    which Dask's memory manager may leave on one worker only, and a task elsewhere then waits for
+    a transfer from it: with Dask 2026.8, one such transfer failed in a stress test of a
+    thousand evaluations and left its task waiting for ever.)"""
+
+    def __init__(self, client: Any, spec: ProblemSpec) -> None:
+        self.client = client
+        self.fit = uuid.uuid4().hex
+        self.spec = pickle.dumps(spec, protocol=pickle.HIGHEST_PROTOCOL)
+
+    def scenario_terms(self, problem: Problem, s: NDArray[np.float64], want: str) -> list[tuple[Any, Any]]:
+        futures = [self.client.submit(_scenario_terms_on_worker, self.spec, self.fit, k, sc.initial, s, want,
+                                      pure=False)
+                   for k, sc in enumerate(problem.scenarios)]
+        terms = []
+        for sc, (r, extra, x, solves, iterations) in zip(problem.scenarios, self.client.gather(futures)):
+            sc.initial = x
+            problem.forward_solves += solves
+            problem.newton_iterations += iterations
+            terms.append((r, extra))
+        problem._tick()
+        return terms
 
 
 def _regularizer(body: Any, params: Parameters, weight: float) -> sp.csr_matrix | None:
