@@ -3,6 +3,7 @@ fit as one after the other, with a target on positions or on a contact force."""
 
 from __future__ import annotations
 
+import importlib
 import json
 import pickle
 
@@ -89,7 +90,7 @@ def test_scenarios_of_one_start_on_a_cluster_give_the_same_fit():
     with sf.sweeps.local_cluster(2) as cluster, Client(cluster, set_as_default=False) as client:
         there = sf.estimate(_body(), None, **args, client=client)
         # Each worker built the problem once for the fit and keeps at most a couple.
-        kept = client.run(lambda: len(__import__("sorofem.inverse._problem", fromlist=["_BUILT"])._BUILT))
+        kept = client.run(lambda: len(importlib.import_module("sorofem.inverse._problem")._BUILT))
     assert there.params == here.params and there.loss == here.loss
     assert there.params["shear_modulus"] == pytest.approx(truth.shear_modulus, rel=1e-6)
     assert (there.forward_solves, there.newton_iterations) == (here.forward_solves, here.newton_iterations)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import numbers
 import os
+import sys
 from dataclasses import dataclass
 from typing import Any, Sequence
 
@@ -159,12 +160,10 @@ def count(value: Any, name: str, minimum: int, maximum: int) -> int:
 
 def dask_client(value: Any, name: str = "client") -> Any:
     """``value`` if it is a ``dask.distributed.Client`` (a :class:`ParameterError` naming
-    ``name`` otherwise: anything else would fail later with an ``AttributeError``)."""
-    try:
-        from dask.distributed import Client
-    except ImportError:  # no Dask, so no client either
-        Client = None
-    if Client is None or not isinstance(value, Client):
+    ``name`` otherwise: anything else would fail later with an ``AttributeError``). A client
+    exists only once ``distributed`` is imported, so it is not imported here (it is an extra)."""
+    distributed = sys.modules.get("distributed")
+    if distributed is None or not isinstance(value, distributed.Client):
         raise ParameterError(f"{name}: expected a dask.distributed.Client, got {describe(value)}", name)
     return value
 

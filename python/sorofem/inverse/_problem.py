@@ -115,8 +115,8 @@ class Problem:
         self.n_data = sum(sc.target.n_residuals for sc in scenarios)
         #: Progress line ticked after every forward solve (None: no progress reporting).
         self.progress: Progress | None = None
-        #: Where the scenarios are evaluated side by side (a Dask cluster, see
-        #: ``sorofem.inverse._estimate``); None: here, one after the other.
+        #: A :class:`RemoteScenarios` that evaluates the scenarios side by side on a Dask
+        #: cluster; None: here, one after the other.
         self.remote: Any = None
 
     def _tick(self) -> None:
@@ -233,7 +233,6 @@ class Problem:
     def rms(self, r: NDArray[np.float64]) -> float:
         data = r[: self.n_data]
         return float(np.sqrt(data @ data / max(self.n_data // 3, 1)))
-
 
 
 @dataclass(frozen=True)
