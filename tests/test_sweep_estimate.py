@@ -97,6 +97,22 @@ def test_scenarios_of_one_start_on_a_cluster_give_the_same_fit():
     assert np.array_equal(there.uncertainty.covariance, here.uncertainty.covariance)
     assert set(kept.values()) <= {0, 1} and sum(kept.values()) >= 1
 
+
+def test_a_scenario_that_does_not_converge_on_a_worker_fails_the_fit_as_here():
+    """A scenario allowed one Newton iteration fails every solve: the fit raises its error,
+    the same with the scenarios on a cluster as in the loop here."""
+    from dask.distributed import Client
+
+    goal = sf.solve_static(_body(22.76e3, 0.2048e6), G).positions
+    target = sf.Target.nodes(np.arange(goal.shape[0]), goal)
+    args = dict(params=["shear_modulus"], x0=[20e3], scenarios=[{"gravity": G}, {"gravity": G, "max_iterations": 1}])
+    with pytest.raises(sf.SolverError) as here:
+        sf.estimate(_body(), target, **args)
+    with sf.sweeps.local_cluster(2) as cluster, Client(cluster, set_as_default=False) as client:
+        with pytest.raises(sf.SolverError) as there:
+            sf.estimate(_body(), target, **args, client=client)
+    assert type(there.value) is type(here.value) and str(there.value) == str(here.value)
+
 def _finger(youngs_modulus: float) -> tuple[sf.Body, sf.Plane]:
     """A 100 x 20 x 20 mm finger clamped at x = 0, its tendon pulled 4 mm, pressing on a
     frictionless table 4 mm under its tip."""

@@ -264,8 +264,9 @@ _KEPT_PROBLEMS = 2
 def _scenario_terms_on_worker(spec: bytes, fit: str, k: int, initial: NDArray[np.float64] | None,
                               s: NDArray[np.float64], want: str) -> tuple[Any, ...]:
     """:meth:`Problem.scenario_terms` of scenario ``k`` where a Dask worker runs it, warm-started
-    from the driver's ``initial``: its terms, its new equilibrium and the solves it took. ``spec``
-    is the pickled :class:`ProblemSpec`, read at the fit's first task on this worker."""
+    from the driver's ``initial``: its terms (``None`` and the error where its solve failed), its
+    new equilibrium and the solves it took. ``spec`` is the pickled :class:`ProblemSpec`, read at
+    the fit's first task on this worker."""
     with _BUILT_LOCK:
         built = _BUILT.pop(fit, None)
         if built is None:
@@ -278,7 +279,10 @@ def _scenario_terms_on_worker(spec: bytes, fit: str, k: int, initial: NDArray[np
         sc = problem.scenarios[k]
         sc.initial = initial
         solves, iterations = problem.forward_solves, problem.newton_iterations
-        r, extra = problem.scenario_terms(k, s, want)
+        try:
+            r, extra = problem.scenario_terms(k, s, want)
+        except SolverError as error:  # returned with the solves it took, which the driver counts
+            r, extra = None, error
         return r, extra, sc.initial, problem.forward_solves - solves, problem.newton_iterations - iterations
 
 
@@ -304,9 +308,15 @@ class RemoteScenarios:
                    for k, sc in enumerate(problem.scenarios)]
         terms = []
         for sc, (r, extra, x, solves, iterations) in zip(problem.scenarios, self.client.gather(futures)):
-            sc.initial = x
             problem.forward_solves += solves
             problem.newton_iterations += iterations
+            if r is None:
+                # As the loop here: the scenarios before it keep their new equilibria (the next
+                # warm starts), and its error is raised (the optimisers take a SolverError as a
+                # rejected step).
+                problem._tick()
+                raise extra
+            sc.initial = x
             terms.append((r, extra))
         problem._tick()
         return terms
