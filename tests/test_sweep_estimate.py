@@ -170,3 +170,31 @@ def test_issue_17_a_contact_force_fit_on_a_cluster_is_the_fit_here():
     assert there.params["youngs_modulus"] == pytest.approx(100e3, rel=1e-3)
     # Here, the first solve of the first start also fixed the barrier stiffness it shares.
     assert there.forward_solves == here.forward_solves + 1
+
+
+def test_contact_force_scenarios_on_a_cluster_agree_with_the_fit_here_to_round_off():
+    """Two scenarios of the finger pressing the table, solved side by side: a bound
+    contact-force target travels in each scenario and the barrier stiffness fixed here with the
+    body. Its tendon, pulled by a length, starts each solve from the tension of its model's last
+    solve, another scenario's on a worker than here: the same fit to round-off, not bit for bit
+    (obstacles alone give it bit for bit)."""
+    from dask.distributed import Client
+
+    force = float(np.linalg.norm(sf.solve_static(_finger(100e3)[0], tolerance=1e-11).obstacle_forces[0]))
+    args = dict(params=["youngs_modulus"], x0=[70e3], bounds=[(30e3, 300e3)])
+    fits = []
+    for on_cluster in (False, True):
+        body, table = _finger(70e3)
+        target = sf.Target.contact_force(table, force).bind(body.mesh, body=body)
+        scenarios = [{"target": target}, {"target": target, "gravity": (0, 0, -9.81)}]
+        if not on_cluster:
+            fits.append(sf.estimate(body, None, scenarios=scenarios, **args))
+            continue
+        with sf.sweeps.local_cluster(2) as cluster, Client(cluster, set_as_default=False) as client:
+            fits.append(sf.estimate(body, None, scenarios=scenarios, **args, client=client))
+    here, there = fits
+    assert there.params["youngs_modulus"] == pytest.approx(here.params["youngs_modulus"], rel=1e-10)
+    assert there.params["youngs_modulus"] == pytest.approx(100e3, rel=1e-3)
+    assert there.iterations == here.iterations
+    # The barrier stiffness fixed before the body went to the workers: one solve more.
+    assert there.forward_solves == here.forward_solves + 1

@@ -262,7 +262,7 @@ def estimate(
         here as starts finish.
         With one start and several ``scenarios``, each evaluation solves the scenarios on
         its workers side by side instead, each warm-started from its last equilibrium here
-        (the same fit, bit for bit).
+        (the same fit, bit for bit; with a tendon pulled by a length, to round-off).
     max_evaluations
         Budget of objective evaluations per start (each is one solve per scenario), from 1 to
         100,000 (a documented limit).

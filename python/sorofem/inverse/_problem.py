@@ -290,7 +290,8 @@ class RemoteScenarios:
     """The scenarios of each evaluation of a :class:`Problem` solved side by side on the workers
     of a Dask ``client``. Each one is warm-started from the equilibrium the driver keeps for it,
     so the evaluations are those of the driver's own loop, bit for bit, whichever worker solves
-    them. The body (its barrier stiffness fixed first, see :meth:`Problem.fix_contact_stiffness`)
+    them. (To round-off with a tendon pulled by a length: a solve starts its tension from the
+    last solve of the same model, which differs between a worker's model and the driver's.) The body (its barrier stiffness fixed first, see :meth:`Problem.fix_contact_stiffness`)
     goes with every task, pickled once here: a worker builds the problem at the fit's first task
     it runs and keeps it. (Scattered once instead, the body would be a dependency of every task,
     which Dask's memory manager may leave on one worker only, and a task elsewhere then waits for
