@@ -157,7 +157,6 @@ def count(value: Any, name: str, minimum: int, maximum: int) -> int:
     return value
 
 
-
 def dask_client(value: Any, name: str = "client") -> Any:
     """``value`` if it is a ``dask.distributed.Client`` (a :class:`ParameterError` naming
     ``name`` otherwise: anything else would fail later with an ``AttributeError``). A client
@@ -166,6 +165,7 @@ def dask_client(value: Any, name: str = "client") -> Any:
     if distributed is None or not isinstance(value, distributed.Client):
         raise ParameterError(f"{name}: expected a dask.distributed.Client, got {describe(value)}", name)
     return value
+
 
 def describe(value: Any) -> str:
     """A value for an error message: ``an array of shape (3,) and dtype int64``, ``str 'abc'``."""

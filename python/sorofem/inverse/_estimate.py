@@ -14,7 +14,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .._files import check_path, write_text
-from .._validate import MAX_EVALUATIONS, MAX_STARTS, boolean, count, dask_client, describe, non_negative, positive_scalar
+from .._validate import (MAX_EVALUATIONS, MAX_STARTS, boolean, count, dask_client, describe, non_negative,
+                         positive_scalar)
 from ..errors import InputError
 from ..io import json_text
 from ..progress import Progress
@@ -138,15 +139,13 @@ def _end_record(start: int, run: Mapping[str, Any], p: Parameters) -> dict[str, 
 
 
 def _start_on_worker(k: int, theta_start: Any, setup: tuple[Any, ...]) -> dict[str, Any]:
-    """One start of a fit where a Dask worker runs it: the problem is built there again (the
-    body travels without its compiled model), exactly as :func:`estimate` builds it."""
-    (body, target, params, regions, scenarios, gravity, solve, regularization, method, lo, hi, max_evaluations,
-     xtol, ftol, t0) = setup
-    p = Parameters(body, params, regions)
-    problem = Problem(body, p, make_scenarios(body, target, scenarios, gravity, solve), regularization)
+    """One start of a fit where a Dask worker runs it: the problem is built there again from
+    its :class:`ProblemSpec`, exactly as :func:`estimate` builds it."""
+    spec, method, lo, hi, max_evaluations, xtol, ftol, t0 = setup
+    problem = spec.build()
     try:
-        return _fit_from(problem, p, theta_start, method, lo, hi, Recorder(problem, False, None, k, t0),
-                         max_evaluations, xtol, ftol)
+        return _fit_from(problem, problem.params, theta_start, method, lo, hi,
+                         Recorder(problem, False, None, k, t0), max_evaluations, xtol, ftol)
     finally:
         problem.restore()
 
@@ -159,7 +158,7 @@ def _remote_starts(client: Any, start_points: list[Any], first_start: int, histo
         problem.params.check(theta_start, f"start {k}")
     # One run after the other fixes the barrier stiffness at the first solve of the first start,
     # and every start shares it: fixed here, it travels with the body to the workers.
-    lo, hi = setup[9], setup[10]
+    lo, hi = setup[2], setup[3]
     problem.fix_contact_stiffness(np.clip(problem.params.to_s(start_points[0]), lo, hi))
     futures = [client.submit(_start_on_worker, first_start + k, theta, setup, pure=False)
                for k, theta in enumerate(start_points)]
@@ -429,15 +428,14 @@ def estimate(
     bar = Progress(desc=f"estimate ({method})", unit="solves", enabled=progress)
     problem.progress = bar
     try:
+        spec = ProblemSpec(body, target, params, regions, scenarios, gravity, solve, regularization)
         if client is not None and len(start_points) == 1 and len(scs) > 1:
             # As with the starts, the barrier stiffness the first solve would fix travels with the body.
             problem.fix_contact_stiffness(np.clip(p.to_s(start_points[0]), lo, hi))
-            problem.remote = RemoteScenarios(client, ProblemSpec(body, target, params, regions, scenarios, gravity,
-                                                                 solve))
+            problem.remote = RemoteScenarios(client, spec)
         if client is not None and len(start_points) > 1:
-            runs = _remote_starts(client, start_points, first_start, history_file, bar, problem, (
-                body, target, params, regions, scenarios, gravity, solve, regularization, method, lo, hi,
-                max_evaluations, xtol, ftol, t0))
+            runs = _remote_starts(client, start_points, first_start, history_file, bar, problem,
+                                  (spec, method, lo, hi, max_evaluations, xtol, ftol, t0))
         else:
             for k, theta_start in enumerate(start_points):
                 p.check(theta_start, f"start {k}")

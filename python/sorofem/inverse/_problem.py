@@ -237,8 +237,8 @@ class Problem:
 
 @dataclass(frozen=True)
 class ProblemSpec:
-    """What builds an inverse problem (without its regulariser) again where a Dask worker
-    evaluates it: the arguments of the fit, the body travelling without its compiled model."""
+    """What builds an inverse problem again where a Dask worker evaluates it (a start, or
+    scenarios): the arguments of the fit, the body travelling without its compiled model."""
 
     body: Any
     target: Any
@@ -247,10 +247,12 @@ class ProblemSpec:
     scenarios: Any
     gravity: Any
     solve: SolveOptions
+    regularization: float = 0.0
 
     def build(self) -> Problem:
         return Problem(self.body, Parameters(self.body, self.params, self.regions),
-                       scenarios(self.body, self.target, self.scenarios, self.gravity, self.solve))
+                       scenarios(self.body, self.target, self.scenarios, self.gravity, self.solve),
+                       self.regularization)
 
 
 #: The problems a worker has built, by fit, each with the lock its evaluations take (a worker
@@ -291,7 +293,8 @@ class RemoteScenarios:
     of a Dask ``client``. Each one is warm-started from the equilibrium the driver keeps for it,
     so the evaluations are those of the driver's own loop, bit for bit, whichever worker solves
     them. (To round-off with a tendon pulled by a length: a solve starts its tension from the
-    last solve of the same model, which differs between a worker's model and the driver's.) The body (its barrier stiffness fixed first, see :meth:`Problem.fix_contact_stiffness`)
+    last solve of the same model, which differs between a worker's model and the driver's.)
+    The body (its barrier stiffness fixed first, see :meth:`Problem.fix_contact_stiffness`)
     goes with every task, pickled once here: a worker builds the problem at the fit's first task
     it runs and keeps it. (Scattered once instead, the body would be a dependency of every task,
     which Dask's memory manager may leave on one worker only, and a task elsewhere then waits for
