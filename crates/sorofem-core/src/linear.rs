@@ -1,21 +1,19 @@
 //! Sparse symmetric factorisations: the symbolic analysis (fill-reducing ordering, elimination
 //! tree, supernodes) is done once per sparsity pattern; each Newton step only refactors numerically.
 
+mod supernodal;
+
 use crate::error::{Error, Result};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
 use faer::linalg::cholesky::llt::factor::LltRegularization;
-use faer::linalg::matmul::matmul;
-use faer::linalg::triangular_solve::{
-    solve_lower_triangular_in_place, solve_upper_triangular_in_place,
-};
-use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::sparse::linalg::cholesky::{
-    factorize_symbolic_cholesky, supernodal::SymbolicSupernodalCholesky, LdltRef, LltRef,
-    SymbolicCholesky, SymbolicCholeskyRaw, SymmetricOrdering,
+    factorize_symbolic_cholesky, LdltRef, LltRef, SymbolicCholesky, SymbolicCholeskyRaw,
+    SymmetricOrdering,
 };
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
-use faer::{Accum, Conj, MatMut, MatRef, Par, Side};
+use faer::{Conj, MatMut, Side};
+use supernodal::SolveSplit;
 
 /// The lower triangle (row >= column) of a symmetric sparse matrix in compressed-column form,
 /// rows sorted within each column.
@@ -85,6 +83,8 @@ enum Stored {
     None,
     Llt,
     Ldlt,
+    /// `L L^T` in single precision (see [`SparseFactor::factor_single`]).
+    LltSingle,
 }
 
 /// Which factorisation a [`SparseFactor`] computes, fixed at its analysis.
@@ -116,6 +116,10 @@ pub struct SparseFactor {
     /// Slot in `permuted` of each stored entry of the caller's pattern.
     slot: Vec<usize>,
     permuted_values: Vec<f64>,
+    /// Single-precision values of `P A P^T` and of its factor (see
+    /// [`SparseFactor::factor_single`]); empty until the first such factorisation.
+    single_permuted: Vec<f32>,
+    single_values: Vec<f32>,
     /// The numeric factorisation's workspace, kept: allocating and freeing its few MB at every
     /// factorisation cost page faults each time.
     scratch: Option<MemBuffer>,
@@ -223,6 +227,8 @@ impl SparseFactor {
             scratch: None,
             order: order.to_vec(),
             permuted_values: written_zeros(permuted.nnz()),
+            single_permuted: Vec::new(),
+            single_values: Vec::new(),
             permuted,
             slot,
         };
@@ -296,6 +302,57 @@ impl SparseFactor {
         }
     }
 
+    /// [`SparseFactor::factor`] in single precision (`L L^T` only; an `L D L^T` analysis
+    /// factors in double precision). For callers that use the factorisation as an approximation
+    /// anyway, as modified Newton does: it takes 0.6 to 0.7 times the time of the double-precision
+    /// one and its solves stream half the bytes, and its relative error, about `1e-7` times the
+    /// condition number, is below the error of a factorisation kept from an earlier iterate.
+    /// `Ok(false)` when the matrix is not numerically positive definite in single precision.
+    pub fn factor_single(&mut self, pattern: &LowerPattern, values: &[f64]) -> Result<bool> {
+        if self.kind != FactorKind::Llt {
+            return self.factor(pattern, values);
+        }
+        self.generation += 1;
+        debug_assert_eq!(pattern.nnz(), self.slot.len(), "the analysed pattern");
+        self.permute_values(values);
+        if self.single_values.is_empty() {
+            self.single_values = vec![0.0; self.values.len()];
+        }
+        self.single_permuted.clear();
+        self.single_permuted
+            .extend(self.permuted_values.iter().map(|&v| v as f32));
+        if self.single_permuted.iter().any(|v| !v.is_finite()) {
+            self.stored = Stored::None;
+            return Ok(false);
+        }
+        let par = self.parallelism();
+        let mat = SparseColMatRef::new(self.permuted.symbolic(), &self.single_permuted);
+        let req = self
+            .symbolic
+            .factorize_numeric_llt_scratch::<f32>(par, Default::default());
+        let mem = scratch_of(&mut self.scratch, req)?;
+        let result = self.symbolic.factorize_numeric_llt::<f32>(
+            &mut self.single_values,
+            mat,
+            Side::Lower,
+            LltRegularization::default(),
+            par,
+            MemStack::new(mem),
+            Default::default(),
+        );
+        self.stored = if result.is_ok() {
+            Stored::LltSingle
+        } else {
+            Stored::None
+        };
+        Ok(result.is_ok())
+    }
+
+    /// Whether the stored factorisation is in single precision.
+    pub fn is_single(&self) -> bool {
+        self.stored == Stored::LltSingle
+    }
+
     /// Numeric `L L^T`. Returns `Ok(false)` when the matrix is not numerically positive definite.
     fn factor_llt(&mut self, pattern: &LowerPattern, values: &[f64]) -> Result<bool> {
         debug_assert_eq!(pattern.nnz(), self.slot.len(), "the analysed pattern");
@@ -361,6 +418,9 @@ impl SparseFactor {
 
     /// Solves `A x = rhs` in place with the stored factorisation.
     pub fn solve_in_place(&self, rhs: &mut [f64]) {
+        if self.stored == Stored::LltSingle {
+            return self.solve_single_in_place(rhs);
+        }
         let mut permuted: Vec<f64> = self.order.iter().map(|&i| rhs[i]).collect();
         match (self.symbolic.raw(), &self.split, self.stored) {
             (SymbolicCholeskyRaw::Supernodal(supernodal), Some(split), Stored::Llt) => {
@@ -371,6 +431,80 @@ impl SparseFactor {
         for (&i, &v) in self.order.iter().zip(&permuted) {
             rhs[i] = v;
         }
+    }
+
+    /// [`SparseFactor::solve_in_place`] with the single-precision factor: the right-hand side is
+    /// rounded to single precision too (its error is the factor's).
+    fn solve_single_in_place(&self, rhs: &mut [f64]) {
+        let b: Vec<f64> = self.order.iter().map(|&i| rhs[i]).collect();
+        for (&i, v) in self.order.iter().zip(self.solve_single_permuted(&b)) {
+            rhs[i] = v;
+        }
+    }
+
+    /// [`SparseFactor::solve_in_place`], followed by one step of iterative refinement when the
+    /// factorisation is in single precision: `x += A^{-1} (b - A x)` with the residual in double
+    /// precision against the matrix that was factored. The relative error, `e` (about `1e-7`
+    /// times the condition number) after the plain solve, becomes about `e^2`, for the cost of a
+    /// second solve and a matrix-vector product.
+    pub fn solve_refined_in_place(&self, rhs: &mut [f64]) {
+        if self.stored != Stored::LltSingle {
+            return self.solve_in_place(rhs);
+        }
+        let b: Vec<f64> = self.order.iter().map(|&i| rhs[i]).collect();
+        let mut x = self.solve_single_permuted(&b);
+        let residual = self.permuted_residual(&b, &x);
+        for (x, dx) in x.iter_mut().zip(self.solve_single_permuted(&residual)) {
+            *x += dx;
+        }
+        for (&i, v) in self.order.iter().zip(x) {
+            rhs[i] = v;
+        }
+    }
+
+    /// `|b - A x| / |b|` for `x` from [`SparseFactor::solve_in_place`]: how accurately the
+    /// stored factorisation solves with the matrix it factored (0 for `b = 0`).
+    pub fn solve_residual(&self, rhs: &[f64]) -> f64 {
+        let b: Vec<f64> = self.order.iter().map(|&i| rhs[i]).collect();
+        let mut x = rhs.to_vec();
+        self.solve_in_place(&mut x);
+        let x: Vec<f64> = self.order.iter().map(|&i| x[i]).collect();
+        let norm = |v: &[f64]| v.iter().map(|a| a * a).sum::<f64>().sqrt();
+        let scale = norm(&b);
+        if scale == 0.0 {
+            return 0.0;
+        }
+        norm(&self.permuted_residual(&b, &x)) / scale
+    }
+
+    /// `b - A x` in elimination order, `A` the matrix of the last factorisation.
+    fn permuted_residual(&self, b: &[f64], x: &[f64]) -> Vec<f64> {
+        let ax = self.permuted.symmetric_matvec(&self.permuted_values, x);
+        b.iter().zip(ax).map(|(b, a)| b - a).collect()
+    }
+
+    /// `A^{-1} b` with the single-precision factor, `b` and the result in elimination order.
+    fn solve_single_permuted(&self, b: &[f64]) -> Vec<f64> {
+        let mut permuted: Vec<f32> = b.iter().map(|&v| v as f32).collect();
+        match (self.symbolic.raw(), &self.split) {
+            (SymbolicCholeskyRaw::Supernodal(supernodal), Some(split)) => {
+                split.solve(supernodal, &self.single_values, &mut permuted)
+            }
+            _ => {
+                let par = self.parallelism();
+                let n = permuted.len();
+                let req = self.symbolic.solve_in_place_scratch::<f32>(1, par);
+                let mut mem = MemBuffer::new(req);
+                let rhs_mat = MatMut::from_column_major_slice_mut(&mut permuted, n, 1);
+                LltRef::new(&self.symbolic, &self.single_values).solve_in_place_with_conj(
+                    Conj::No,
+                    rhs_mat,
+                    par,
+                    MemStack::new(&mut mem),
+                );
+            }
+        }
+        permuted.into_iter().map(f64::from).collect()
     }
 
     /// faer's solve, on a right-hand side already in elimination order.
@@ -393,261 +527,11 @@ impl SparseFactor {
                 par,
                 MemStack::new(&mut mem),
             ),
-            Stored::None => panic!("solve_in_place called without a successful factorisation"),
-        }
-    }
-}
-
-/// How the triangular solves of a supernodal factor share the work between two threads: two
-/// groups of disjoint subtrees of the supernodal elimination tree, whose sweeps touch only their
-/// own unknowns and those of the supernodes above them (`top`), which are swept alone.
-///
-/// Why: one right-hand side makes each sweep a stream through the whole factor with little
-/// arithmetic per value read, and the other core is idle meanwhile. On this project's 2-core
-/// machine the split solve takes 0.85 ms instead of faer's 1.15 ms on the 12k-tet cantilever's
-/// factor (0.54 instead of 0.73 ms on the hammerbot's). Used for `L L^T` only: on the mixed
-/// formulation's `L D L^T` factor (hammerbot, pressures eliminated last) it was slower than
-/// faer's (1.95 against 1.6 ms).
-struct SolveSplit {
-    /// Supernodes of each group, and of the top, ascending (children before parents).
-    groups: [Vec<usize>; 2],
-    top: Vec<usize>,
-    /// Unknowns (in elimination order) of group 1's supernodes, and of the top's.
-    second_rows: Vec<usize>,
-    top_rows: Vec<usize>,
-}
-
-impl SolveSplit {
-    /// Splits off the top of the tree until its subtrees fall into two groups of about equal
-    /// factor size (greedy, largest first), keeping the split with the least critical path
-    /// `max(group sizes) + top size`. None when that saves under a fifth of the factor.
-    fn new(symbolic: &SymbolicSupernodalCholesky<usize>) -> Option<Self> {
-        let n_super = symbolic.n_supernodes();
-        let (begin, end) = (symbolic.supernode_begin(), symbolic.supernode_end());
-        let (value_ptr, row_ptr, rows) = (
-            symbolic.col_ptr_for_val(),
-            symbolic.col_ptr_for_row_idx(),
-            symbolic.row_idx(),
-        );
-        let mut supernode_of = vec![0usize; symbolic.nrows()];
-        for s in 0..n_super {
-            supernode_of[begin[s]..end[s]].fill(s);
-        }
-        let mut children = vec![Vec::new(); n_super];
-        let mut roots = Vec::new();
-        let mut weight: Vec<f64> = (0..n_super)
-            .map(|s| (value_ptr[s + 1] - value_ptr[s]) as f64)
-            .collect();
-        for s in 0..n_super {
-            let m = end[s] - begin[s];
-            let below = (value_ptr[s + 1] - value_ptr[s]) / m - m;
-            if below == 0 {
-                roots.push(s);
-            } else {
-                // The parent is the supernode of the first row below the diagonal block; it
-                // comes after s, so the weights accumulate in one ascending pass.
-                let parent = supernode_of[rows[row_ptr[s]]];
-                children[parent].push(s);
-                weight[parent] += weight[s];
-            }
-        }
-        let total: f64 = roots.iter().map(|&r| weight[r]).sum();
-        let mut candidates = roots;
-        let mut top = Vec::new();
-        let mut top_weight = 0.0;
-        let mut best: Option<(f64, [Vec<usize>; 2], Vec<usize>)> = None;
-        for _ in 0..n_super {
-            candidates.sort_by(|a, b| weight[*b].total_cmp(&weight[*a]));
-            let mut bins = [(0.0, Vec::new()), (0.0, Vec::new())];
-            for &c in &candidates {
-                let lighter = usize::from(bins[1].0 < bins[0].0);
-                bins[lighter].0 += weight[c];
-                bins[lighter].1.push(c);
-            }
-            let path = bins[0].0.max(bins[1].0) + top_weight;
-            if best.as_ref().is_none_or(|b| path < b.0) {
-                let [(_, first), (_, second)] = bins;
-                best = Some((path, [first, second], top.clone()));
-            }
-            if top_weight > 0.5 * total {
-                break;
-            }
-            let Some(&heaviest) = candidates.first() else {
-                break;
-            };
-            candidates.remove(0);
-            top.push(heaviest);
-            top_weight +=
-                weight[heaviest] - children[heaviest].iter().map(|&c| weight[c]).sum::<f64>();
-            candidates.extend(&children[heaviest]);
-        }
-        let (path, subtree_roots, mut top) = best.expect("at least one candidate split");
-        if path > 0.8 * total {
-            return None;
-        }
-        let groups = subtree_roots.map(|group_roots| {
-            let mut members = Vec::new();
-            let mut stack = group_roots;
-            while let Some(s) = stack.pop() {
-                members.push(s);
-                stack.extend(&children[s]);
-            }
-            members.sort_unstable();
-            members
-        });
-        top.sort_unstable();
-        let rows_of = |supernodes: &[usize]| -> Vec<usize> {
-            supernodes.iter().flat_map(|&s| begin[s]..end[s]).collect()
-        };
-        Some(SolveSplit {
-            second_rows: rows_of(&groups[1]),
-            top_rows: rows_of(&top),
-            groups,
-            top,
-        })
-    }
-
-    /// `L L^T x = b` for one right-hand side `x` in elimination order.
-    fn solve(&self, symbolic: &SymbolicSupernodalCholesky<usize>, values: &[f64], x: &mut [f64]) {
-        let factor = SupernodalFactor { symbolic, values };
-        // Forward: group 1 works on a copy in which the top's unknowns start at zero, so that
-        // they collect its updates to be added to group 0's.
-        let mut second = x.to_vec();
-        for &r in &self.top_rows {
-            second[r] = 0.0;
-        }
-        rayon::join(
-            || factor.forward(&self.groups[0], x),
-            || factor.forward(&self.groups[1], &mut second),
-        );
-        for &r in &self.second_rows {
-            x[r] = second[r];
-        }
-        for &r in &self.top_rows {
-            x[r] += second[r];
-        }
-        factor.forward(&self.top, x);
-        factor.backward(&self.top, x);
-        second.copy_from_slice(x);
-        rayon::join(
-            || factor.backward(&self.groups[0], x),
-            || factor.backward(&self.groups[1], &mut second),
-        );
-        for &r in &self.second_rows {
-            x[r] = second[r];
-        }
-    }
-}
-
-/// A numeric supernodal Cholesky factor. Each supernode's values are a column-major block: its
-/// `m` diagonal columns over the rows below them (its pattern).
-struct SupernodalFactor<'a> {
-    symbolic: &'a SymbolicSupernodalCholesky<usize>,
-    values: &'a [f64],
-}
-
-impl SupernodalFactor<'_> {
-    /// `(first unknown, width m, block height, block, pattern)` of supernode `s`.
-    fn block(&self, s: usize) -> (usize, usize, usize, &[f64], &[usize]) {
-        let sym = self.symbolic;
-        let (start, end) = (sym.supernode_begin()[s], sym.supernode_end()[s]);
-        let m = end - start;
-        let block = &self.values[sym.col_ptr_for_val()[s]..sym.col_ptr_for_val()[s + 1]];
-        let height = block.len() / m;
-        let row_start = sym.col_ptr_for_row_idx()[s];
-        let pattern = &sym.row_idx()[row_start..row_start + height - m];
-        (start, m, height, block, pattern)
-    }
-
-    /// `x <- L^{-1} x` over the given supernodes (ascending).
-    fn forward(&self, supernodes: &[usize], x: &mut [f64]) {
-        let mut below = Vec::new();
-        for &s in supernodes {
-            let (start, m, height, block, pattern) = self.block(s);
-            below.clear();
-            below.resize(pattern.len(), 0.0);
-            if m >= WIDE_SUPERNODE {
-                let l = MatRef::from_column_major_slice(block, height, m);
-                let (diagonal, lower) = l.split_at_row(m);
-                let mut top = MatMut::from_column_major_slice_mut(&mut x[start..start + m], m, 1);
-                solve_lower_triangular_in_place(diagonal, top.rb_mut(), Par::Seq);
-                let below_mat = MatMut::from_column_major_slice_mut(&mut below, height - m, 1);
-                matmul(below_mat, Accum::Replace, lower, top.rb(), 1.0, Par::Seq);
-            } else {
-                for j in 0..m {
-                    let column = &block[j * height..(j + 1) * height];
-                    let xj = x[start + j] / column[j];
-                    x[start + j] = xj;
-                    for (xi, l) in x[start + j + 1..start + m]
-                        .iter_mut()
-                        .zip(&column[j + 1..m])
-                    {
-                        *xi -= l * xj;
-                    }
-                    for (acc, l) in below.iter_mut().zip(&column[m..]) {
-                        *acc += l * xj;
-                    }
-                }
-            }
-            for (&row, acc) in pattern.iter().zip(&below) {
-                x[row] -= acc;
+            Stored::None | Stored::LltSingle => {
+                panic!("faer_solve_in_place called without a double-precision factorisation")
             }
         }
     }
-
-    /// `x <- L^{-T} x` over the given supernodes (visited descending).
-    fn backward(&self, supernodes: &[usize], x: &mut [f64]) {
-        let mut below = Vec::new();
-        for &s in supernodes.iter().rev() {
-            let (start, m, height, block, pattern) = self.block(s);
-            below.clear();
-            below.extend(pattern.iter().map(|&row| x[row]));
-            if m >= WIDE_SUPERNODE {
-                let l = MatRef::from_column_major_slice(block, height, m);
-                let (diagonal, lower) = l.split_at_row(m);
-                let mut top = MatMut::from_column_major_slice_mut(&mut x[start..start + m], m, 1);
-                let below_mat = MatRef::from_column_major_slice(&below, height - m, 1);
-                matmul(
-                    top.rb_mut(),
-                    Accum::Add,
-                    lower.transpose(),
-                    below_mat,
-                    -1.0,
-                    Par::Seq,
-                );
-                solve_upper_triangular_in_place(diagonal.transpose(), top, Par::Seq);
-            } else {
-                for j in (0..m).rev() {
-                    let column = &block[j * height..(j + 1) * height];
-                    let mut xj = x[start + j] - dot(&column[m..], &below);
-                    xj -= dot(&column[j + 1..m], &x[start + j + 1..start + m]);
-                    x[start + j] = xj / column[j];
-                }
-            }
-        }
-    }
-}
-
-/// Supernodes at least this wide go through faer's dense kernels (vectorised for the running
-/// CPU); narrower ones through plain loops, which skip the kernels' dispatch.
-const WIDE_SUPERNODE: usize = 8;
-
-/// `a . b` with eight partial sums, so that it vectorises.
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    let mut partial = [0.0; 8];
-    let (a_chunks, b_chunks) = (a.chunks_exact(8), b.chunks_exact(8));
-    let tail: f64 = a_chunks
-        .remainder()
-        .iter()
-        .zip(b_chunks.remainder())
-        .map(|(x, y)| x * y)
-        .sum();
-    for (x, y) in a_chunks.zip(b_chunks) {
-        for k in 0..8 {
-            partial[k] += x[k] * y[k];
-        }
-    }
-    partial.iter().sum::<f64>() + tail
 }
 
 /// `n` zeros in memory that has been written. A freshly allocated zero vector is usually mapped
@@ -759,6 +643,47 @@ mod tests {
         assert!(err < 1e-10, "{err}");
         let (_, v_indef) = grid_laplacian([50, 1, 1], -3.0);
         assert!(!f.factor(&p, &v_indef).unwrap());
+    }
+
+    /// Single precision on the split supernodal path (14^3 grid) and on faer's (a chain): the
+    /// plain solve is accurate to single precision only, one refinement step to about its
+    /// square; `solve_residual` measures the plain solve; a double-precision factorisation
+    /// afterwards solves to double precision again.
+    #[test]
+    fn single_precision_factor_solves_and_refines() {
+        for (dims, shift) in [([14, 14, 14], 0.1), ([50, 1, 1], 0.05)] {
+            let (p, v) = grid_laplacian(dims, shift);
+            let mut f = SparseFactor::analyse(&p, FactorKind::Llt).unwrap();
+            let x: Vec<f64> = (0..p.n).map(|i| (0.37 * i as f64).sin()).collect();
+            let b = p.symmetric_matvec(&v, &x);
+            let generation = f.generation();
+            assert!(f.factor_single(&p, &v).unwrap());
+            assert!(f.is_single() && f.generation() == generation + 1);
+            let mut plain = b.clone();
+            f.solve_in_place(&mut plain);
+            let plain_error = max_difference(&plain, &x);
+            assert!(
+                plain_error > 1e-9 && plain_error < 1e-3,
+                "{dims:?}: {plain_error}"
+            );
+            let residual = f.solve_residual(&b);
+            assert!(residual > 1e-10 && residual < 1e-5, "{dims:?}: {residual}");
+            let mut refined = b.clone();
+            f.solve_refined_in_place(&mut refined);
+            let refined_error = max_difference(&refined, &x);
+            assert!(
+                refined_error < 1e-3 * plain_error,
+                "{dims:?}: {refined_error} vs {plain_error}"
+            );
+            assert!(f.factor(&p, &v).unwrap() && !f.is_single());
+            let mut double = b.clone();
+            f.solve_in_place(&mut double);
+            assert!(max_difference(&double, &x) < 1e-11);
+            assert!(f.solve_residual(&b) < 1e-14);
+        }
+        let (p, v_indef) = grid_laplacian([50, 1, 1], -3.0);
+        let mut f = SparseFactor::analyse(&p, FactorKind::Llt).unwrap();
+        assert!(!f.factor_single(&p, &v_indef).unwrap());
     }
 
     #[test]
