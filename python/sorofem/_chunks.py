@@ -32,6 +32,7 @@ class Joined:
         self.residuals: list[NDArray[np.float64]] = []
         self.contact: list[dict[str, Any]] = []
         self.cutbacks = 0
+        self.single_precision_factorizations = 0
         #: The core's seconds per phase, summed over the chunks.
         self.timings: dict[str, float] = {}
         self.velocities: Any = None
@@ -51,6 +52,7 @@ class Joined:
             "factorizations": np.concatenate(self.factorizations),
             "residuals": np.concatenate(self.residuals),
             "cutbacks": self.cutbacks,
+            "single_precision_factorizations": self.single_precision_factorizations,
             "timings": self.timings,
             "contact": None if not self.contact else {
                 key: (np.concatenate([c[key] for c in self.contact]) if key != "iterate_min_distances"

@@ -36,6 +36,7 @@ class _Report(TypedDict):
     projected_steps: int
     factorizations: int  # numeric factorisations, failed ones included
     failed_factorizations: int  # not positive definite, or no descent direction
+    single_precision_factorizations: int  # of them, in single precision
     residual_norm: float  # final absolute residual, N
     reference_norm: float  # N
     message: str
@@ -103,6 +104,7 @@ class _Trajectory(TypedDict):
     factorizations: list[int]  # numeric factorisations per step
     residuals: list[float]  # relative residual each step ended with
     cutbacks: int
+    single_precision_factorizations: int  # of all steps' factorisations
     contact: NotRequired[_TrajectoryContact]  # with obstacles only
     timings: dict[str, float]  # seconds per phase, all steps
 

@@ -241,6 +241,12 @@ class Trajectory:
         Newton iterations of each time step, ``(steps,)`` (sub-steps of a cut-back step added).
     factorizations
         Numeric factorisations of each time step's Hessian, ``(steps,)`` (the same way).
+    single_precision_factorizations
+        How many of them, over the run, were computed in single precision: the kept
+        factorisations of ``"modified"`` and ``"linearly_implicit"`` steps, unless single
+        precision was not accurate enough for the body (then every factorisation from that
+        one on is in double precision) or displacement-controlled tendons or the mixed
+        formulation ask for double precision.
     residuals
         The relative residual each time step ended with, ``(steps,)``: below ``tolerance``
         unless ``method="linearly_implicit"``.
@@ -285,6 +291,7 @@ class Trajectory:
         self.factorizations = np.asarray(out["factorizations"], dtype=np.int64)
         self.residuals = np.asarray(out["residuals"], dtype=np.float64)
         self.cutbacks = int(out.get("cutbacks", 0))
+        self.single_precision_factorizations = int(out.get("single_precision_factorizations", 0))
         self.cable_points = [[np.asarray(p, dtype=np.float64) for p in frame] for frame in out.get("cable_points", [])]
         self.cable_tension: list[list[float | None]] = [list(frame) for frame in out.get("tendon_tensions", [])]
         self.cable_pull: list[list[float | None]] = [list(frame) for frame in out.get("tendon_pulls", [])]
@@ -362,6 +369,8 @@ class Trajectory:
             "max_iterations_per_step": int(self.iterations.max(initial=0)),
             "mean_iterations_per_step": float(self.iterations.mean()) if self.iterations.size else 0.0,
             "cutbacks": self.cutbacks,
+            "factorizations": int(self.factorizations.sum()),
+            "single_precision_factorizations": self.single_precision_factorizations,
             "final_kinetic_energy": float(self.kinetic_energy[-1]),
             "max_kinetic_energy": float(self.kinetic_energy.max()),
             "max_displacement": float(np.linalg.norm(self.displacement[-1], axis=1).max(initial=0.0)),
@@ -661,6 +670,7 @@ def _run_in_chunks(
         joined.factorizations.append(np.asarray(out["factorizations"], dtype=np.int64))
         joined.residuals.append(np.asarray(out["residuals"], dtype=np.float64))
         joined.cutbacks += int(out.get("cutbacks", 0))
+        joined.single_precision_factorizations += int(out.get("single_precision_factorizations", 0))
         for phase, seconds in out.get("timings", {}).items():
             joined.timings[phase] = joined.timings.get(phase, 0.0) + float(seconds)
         joined.velocities = out["velocities"]

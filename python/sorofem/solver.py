@@ -134,6 +134,9 @@ class SolveReport:
         Hessian that turned out indefinite).
     failed_factorizations
         Those of them that gave no usable direction (matrix not positive definite).
+    single_precision_factorizations
+        Those of them computed in single precision (only the kept factorisations of dynamics'
+        modified Newton; static solves factor in double precision).
     step_lengths
         Line-search step length of each iteration.
     timings
@@ -156,6 +159,7 @@ class SolveReport:
     projected_steps: int = 0
     factorizations: int = 0
     failed_factorizations: int = 0
+    single_precision_factorizations: int = 0
     step_lengths: list[float] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
     absolute_residual_norm: float = math.nan
@@ -178,6 +182,7 @@ class SolveReport:
             projected_steps=int(data.get("projected_steps", 0)),
             factorizations=int(data.get("factorizations", 0)),
             failed_factorizations=int(data.get("failed_factorizations", 0)),
+            single_precision_factorizations=int(data.get("single_precision_factorizations", 0)),
             step_lengths=[float(t) for t in data.get("step_lengths", [])],
             timings={str(k): float(v) for k, v in dict(data.get("timings", {})).items()},
             # The extension's "residual_norm" is absolute; ours (a property) is relative.

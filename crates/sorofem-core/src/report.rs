@@ -24,6 +24,9 @@ pub struct Timings {
     /// Numeric factorisations, and how many of them failed or gave no descent direction.
     pub factorizations: usize,
     pub failed_factorizations: usize,
+    /// Those of `factorizations` computed in single precision (the kept factorisations of
+    /// modified Newton; see `crate::linear::SparseFactor::factor_single`).
+    pub single_precision_factorizations: usize,
 }
 
 /// What happened during a solve: enough to judge convergence and where the time went.

@@ -118,6 +118,10 @@ pub fn report_to_dict<'py>(py: Python<'py>, report: &SolveReport) -> PyResult<Bo
         "failed_factorizations",
         report.timings.failed_factorizations,
     )?;
+    d.set_item(
+        "single_precision_factorizations",
+        report.timings.single_precision_factorizations,
+    )?;
     d.set_item("residual_norm", report.residual_norm)?;
     d.set_item("reference_norm", report.reference_norm)?;
     d.set_item("message", report.message.clone())?;

@@ -456,6 +456,10 @@ impl Model {
         out.set_item("factorizations", trajectory.factorizations)?;
         out.set_item("residuals", trajectory.residuals)?;
         out.set_item("cutbacks", trajectory.cutbacks)?;
+        out.set_item(
+            "single_precision_factorizations",
+            trajectory.timings.single_precision_factorizations,
+        )?;
         if !trajectory.contact.is_empty() {
             let contact = crate::contact::trajectory_to_dict(
                 py,

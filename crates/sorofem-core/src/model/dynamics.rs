@@ -564,6 +564,7 @@ impl Model {
         );
         if setup.method != StepMethod::Newton {
             reuse.start_solve();
+            reuse.refine = setup.method == StepMethod::LinearlyImplicit;
             problem.reuse = Some(reuse.clone());
         }
         if problem.model.terms.contact.is_some() {
@@ -778,6 +779,7 @@ fn add_timings(a: &mut Timings, b: &Timings) {
     a.total += b.total;
     a.factorizations += b.factorizations;
     a.failed_factorizations += b.failed_factorizations;
+    a.single_precision_factorizations += b.single_precision_factorizations;
     a.contact += b.contact;
     a.step_bound += b.step_bound;
 }

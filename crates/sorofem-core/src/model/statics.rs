@@ -426,5 +426,6 @@ fn absorb(report: &mut SolveReport, more: SolveReport) {
     t.total += m.total;
     t.factorizations += m.factorizations;
     t.failed_factorizations += m.failed_factorizations;
+    t.single_precision_factorizations += m.single_precision_factorizations;
     report.message = format!("converged in {} Newton iterations", report.iterations);
 }

@@ -336,7 +336,11 @@ impl System<'_> {
                 }
             }
         }
-        self.model.factor.solve_in_place(&mut d);
+        if self.reuse.as_ref().is_some_and(|r| r.refine) {
+            self.model.factor.solve_refined_in_place(&mut d);
+        } else {
+            self.model.factor.solve_in_place(&mut d);
+        }
         if !self.constraints.is_empty() {
             let model = &*self.model;
             let step = (self.constraints).bordered_step(
@@ -376,52 +380,6 @@ impl System<'_> {
     /// stiffness may change between them).
     fn learns_secants(&self) -> bool {
         self.merit() == Merit::Energy && self.contact.is_none() && self.step.is_some()
-    }
-
-    /// A direction from the kept factorisation of [`FactorReuse`], when there is one, the
-    /// residual fell enough since the last direction, the same tendons are taut as where it was
-    /// factorised and it gives a usable direction.
-    fn kept_direction(
-        &mut self,
-        z: &[f64],
-        g: &[f64],
-        g_norm: f64,
-        timings: &mut Timings,
-    ) -> Option<Vec<f64>> {
-        let reuse = self.reuse.as_ref()?;
-        let slow = reuse
-            .last_norm
-            .is_some_and(|last| g_norm > reuse.max_ratio * last);
-        if slow
-            || reuse.kept != Some(self.model.factor.generation())
-            || reuse.taut != self.taut(z)
-            || reuse.contact_set != self.active_contacts()
-        {
-            return None;
-        }
-        let d = if self.learns_secants() {
-            let x = self.free_values(z);
-            let reuse = self.reuse.as_mut().expect("checked above");
-            reuse.secants.record(x, g);
-            let secants = std::mem::take(&mut reuse.secants);
-            // solve_with_factor gives -H_0^{-1} q; the update needs +H_0^{-1} q.
-            let d = secants.apply_inverse(g, |q| {
-                self.solve_with_factor(z, q, timings)
-                    .map(|d| d.into_iter().map(|v| -v).collect())
-            });
-            self.reuse.as_mut().expect("checked above").secants = secants;
-            d?.into_iter().map(|v| -v).collect()
-        } else {
-            self.solve_with_factor(z, g, timings)?
-        };
-        let usable = self.is_usable(&d, g);
-        let reuse = self.reuse.as_mut().expect("checked above");
-        if !usable {
-            return None;
-        }
-        reuse.last_norm = Some(g_norm);
-        reuse.reused += 1;
-        Some(d)
     }
 
     /// The merit (see [`NewtonProblem::merit_and_gradient`]) from the terms' energy and
@@ -602,7 +560,11 @@ impl NewtonProblem for System<'_> {
         timings.assembly += t0.elapsed().as_secs_f64();
         let pattern = self.model.assembler.pattern();
         let t0 = Instant::now();
-        let ok = self.model.factor.factor(pattern, &eval.hessian);
+        let ok = if self.reuse.is_some() {
+            self.factor_kept(&eval.hessian, g, timings)
+        } else {
+            self.model.factor.factor(pattern, &eval.hessian)
+        };
         let contact_set = self.active_contacts();
         let seconds = t0.elapsed().as_secs_f64();
         self.model.hessian_scratch = eval;

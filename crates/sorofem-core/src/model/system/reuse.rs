@@ -1,6 +1,103 @@
 //! Modified Newton across the solves of a simulation: a kept factorisation, refined by the
 //! secant pairs of the current solve (L-BFGS with the kept factor as its initial inverse).
 
+use super::System;
+use crate::error::Result;
+use crate::linear::FactorKind;
+use crate::report::Timings;
+
+/// The largest relative residual `|H x - g| / |g|` a single-precision factorisation's solve may
+/// leave for it to be kept (see `System::factor_kept`). Well-conditioned Hessians leave about
+/// `1e-6`; at `1e-3` the error of its directions is still small against that of a factorisation
+/// kept from an earlier iterate.
+const MAX_SINGLE_PRECISION_RESIDUAL: f64 = 1e-3;
+
+impl System<'_> {
+    /// Factors `hessian` (free DOFs, the assembler's pattern) for [`FactorReuse`]. A kept
+    /// factorisation only approximates the Hessians it serves, so it is computed in single
+    /// precision ([`crate::linear::SparseFactor::factor_single`]) while that is accurate: its
+    /// solve of `H x = g` (`g`: the merit gradient, whose free rows are used) must leave a
+    /// residual below [`MAX_SINGLE_PRECISION_RESIDUAL`] of `|g|`, and the matrix must be
+    /// definite in single precision. Otherwise it is factored in double precision, as is every
+    /// later one of the simulation. Mixed formulations (`L D L^T`) and displacement-controlled
+    /// tendons are always factored in double precision. Returns whether the factorisation
+    /// succeeded.
+    pub(super) fn factor_kept(
+        &mut self,
+        hessian: &[f64],
+        g: &[f64],
+        timings: &mut Timings,
+    ) -> Result<bool> {
+        let pattern = self.model.assembler.pattern();
+        // The bordered step of displacement-controlled tendons solves for the tendons' whole
+        // forces, not for the residual: a single-precision error there would not shrink with
+        // the residual, and the iterations would stall at it.
+        let double = self.reuse.as_ref().is_some_and(|r| r.double_precision)
+            || self.model.factor.kind() != FactorKind::Llt
+            || !self.constraints.is_empty();
+        if !double
+            && self.model.factor.factor_single(pattern, hessian)?
+            && self.model.factor.solve_residual(&g[..pattern.n]) <= MAX_SINGLE_PRECISION_RESIDUAL
+        {
+            timings.single_precision_factorizations += 1;
+            return Ok(true);
+        }
+        let ok = self.model.factor.factor(pattern, hessian)?;
+        if ok && !double {
+            if let Some(reuse) = &mut self.reuse {
+                reuse.double_precision = true;
+            }
+        }
+        Ok(ok)
+    }
+
+    /// A direction from the kept factorisation of [`FactorReuse`], when there is one, the
+    /// residual fell enough since the last direction, the same tendons are taut as where it was
+    /// factorised and it gives a usable direction.
+    pub(super) fn kept_direction(
+        &mut self,
+        z: &[f64],
+        g: &[f64],
+        g_norm: f64,
+        timings: &mut Timings,
+    ) -> Option<Vec<f64>> {
+        let reuse = self.reuse.as_ref()?;
+        let slow = reuse
+            .last_norm
+            .is_some_and(|last| g_norm > reuse.max_ratio * last);
+        if slow
+            || reuse.kept != Some(self.model.factor.generation())
+            || reuse.taut != self.taut(z)
+            || reuse.contact_set != self.active_contacts()
+        {
+            return None;
+        }
+        let d = if self.learns_secants() {
+            let x = self.free_values(z);
+            let reuse = self.reuse.as_mut().expect("checked above");
+            reuse.secants.record(x, g);
+            let secants = std::mem::take(&mut reuse.secants);
+            // solve_with_factor gives -H_0^{-1} q; the update needs +H_0^{-1} q.
+            let d = secants.apply_inverse(g, |q| {
+                self.solve_with_factor(z, q, timings)
+                    .map(|d| d.into_iter().map(|v| -v).collect())
+            });
+            self.reuse.as_mut().expect("checked above").secants = secants;
+            d?.into_iter().map(|v| -v).collect()
+        } else {
+            self.solve_with_factor(z, g, timings)?
+        };
+        let usable = self.is_usable(&d, g);
+        let reuse = self.reuse.as_mut().expect("checked above");
+        if !usable {
+            return None;
+        }
+        reuse.last_norm = Some(g_norm);
+        reuse.reused += 1;
+        Some(d)
+    }
+}
+
 /// Modified Newton for a sequence of solves (the steps of a simulation): directions
 /// `d = -H_kept^{-1} g` from a factorisation kept across iterations and solves, until the
 /// residual falls by less than `max_ratio` in an iteration (or the kept factor gives no
@@ -29,6 +126,15 @@ pub(crate) struct FactorReuse {
     pub(crate) taut: Vec<bool>,
     /// The current solve's secant pairs since the kept factorisation.
     pub(crate) secants: SecantPairs,
+    /// Whether factorisations are in double precision: from the first single-precision one
+    /// that was not accurate enough on, for the rest of the simulation (see
+    /// `System::factor_kept`).
+    pub(crate) double_precision: bool,
+    /// Whether solves with a single-precision factorisation take a step of iterative refinement
+    /// ([`crate::linear::SparseFactor::solve_refined_in_place`]): for steps that take one
+    /// direction and keep its error, as a linearly implicit step does; iterations to a
+    /// tolerance remove it anyway.
+    pub(crate) refine: bool,
 }
 
 impl FactorReuse {
@@ -41,6 +147,8 @@ impl FactorReuse {
             reused: 0,
             taut: Vec::new(),
             secants: SecantPairs::default(),
+            double_precision: false,
+            refine: false,
         }
     }
 
