@@ -19,7 +19,8 @@ TABLES["dynamics"] = Table(
     "1e-8 per step, `sf.simulate` with each step method (`method=`: `newton` refactorises at every "
     "iteration, `modified` (the default) keeps the factorisation across iterations and steps, "
     "`linearly_implicit` takes one kept-factor iteration per step). Time = wall time of `Body`, `fix` and "
-    "`simulate` (one run). Factorisations = numeric factorisations of the step Hessian. Tip deviation = "
+    "`simulate` (one run). Factorisations = numeric factorisations of the step Hessian; single prec. = "
+    "those of them in single precision (the kept ones; docs/theory.md, \"Dynamics\"). Tip deviation = "
     "the largest distance over the 101 frames between the tip's mean displacement and that of a "
     "tight-tolerance run (`newton`, tolerance 1e-11), relative to the largest tip displacement of that "
     "run. Cutbacks = time steps halved after a Newton failure; a step that still fails after six "
@@ -35,6 +36,7 @@ TABLES["dynamics"] = Table(
         col("Newton it. (total)", "iterations"),
         col("it./step mean", "mean_iterations_per_step"),
         col("fact./step mean", "mean_factorizations_per_step"),
+        col("single prec.", "single_precision_factorizations"),
         col("time [s]", "seconds"),
         col("per step [ms]", "seconds_per_step", ms),
         col("tip deviation [%]", "max_tip_deviation_percent"),
@@ -92,6 +94,7 @@ def _hammerbot_dynamics(method: str) -> Row:
         iterations=int(iterations.sum()), iterations_per_step=iterations.tolist(),
         mean_iterations_per_step=float(iterations.mean()), max_iterations_per_step=int(iterations.max()),
         factorizations=int(factorizations.sum()), mean_factorizations_per_step=float(factorizations.mean()),
+        single_precision_factorizations=traj.single_precision_factorizations,
         max_residual=float(np.max(traj.residuals)), max_tip_deviation_percent=100 * float(deviation),
         cutbacks=int(traj.cutbacks), max_kinetic_energy=float(kinetic.max()), final_kinetic_energy=float(kinetic[-1]),
         tip_displacement=tip[-1].tolist(), note=f"via {row['api']}, method={method!r}",
