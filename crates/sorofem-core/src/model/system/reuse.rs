@@ -7,9 +7,9 @@ use crate::linear::FactorKind;
 use crate::report::Timings;
 
 /// The largest relative residual `|H x - g| / |g|` a single-precision factorisation's solve may
-/// leave for it to be kept (see `System::factor_kept`). Well-conditioned Hessians leave about
-/// `1e-6`; at `1e-3` the error of its directions is still small against that of a factorisation
-/// kept from an earlier iterate.
+/// leave for it to be kept (see `System::factor_kept`): at this level the error of its directions
+/// is still small against that of a factorisation kept from an earlier iterate (docs/theory.md,
+/// "Dynamics", has the levels measured on this project's bodies).
 const MAX_SINGLE_PRECISION_RESIDUAL: f64 = 1e-3;
 
 impl System<'_> {
