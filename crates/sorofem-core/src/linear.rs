@@ -12,7 +12,7 @@ use faer::sparse::linalg::cholesky::{
     SymmetricOrdering,
 };
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
-use faer::{Conj, MatMut, Side};
+use faer::{Conj, MatMut, Par, Side};
 use supernodal::SolveSplit;
 
 /// The lower triangle (row >= column) of a symmetric sparse matrix in compressed-column form,
@@ -326,26 +326,16 @@ impl SparseFactor {
             return Ok(false);
         }
         let par = self.parallelism();
-        let mat = SparseColMatRef::new(self.permuted.symbolic(), &self.single_permuted);
-        let req = self
-            .symbolic
-            .factorize_numeric_llt_scratch::<f32>(par, Default::default());
-        let mem = scratch_of(&mut self.scratch, req)?;
-        let result = self.symbolic.factorize_numeric_llt::<f32>(
+        let ok = numeric_llt(
+            &self.symbolic,
+            &mut self.scratch,
+            self.permuted.symbolic(),
+            &self.single_permuted,
             &mut self.single_values,
-            mat,
-            Side::Lower,
-            LltRegularization::default(),
             par,
-            MemStack::new(mem),
-            Default::default(),
-        );
-        self.stored = if result.is_ok() {
-            Stored::LltSingle
-        } else {
-            Stored::None
-        };
-        Ok(result.is_ok())
+        )?;
+        self.stored = if ok { Stored::LltSingle } else { Stored::None };
+        Ok(ok)
     }
 
     /// Whether the stored factorisation is in single precision.
@@ -358,31 +348,16 @@ impl SparseFactor {
         debug_assert_eq!(pattern.nnz(), self.slot.len(), "the analysed pattern");
         self.permute_values(values);
         let par = self.parallelism();
-        let mat = SparseColMatRef::new(self.permuted.symbolic(), &self.permuted_values);
-        let req = self
-            .symbolic
-            .factorize_numeric_llt_scratch::<f64>(par, Default::default());
-        let mem = scratch_of(&mut self.scratch, req)?;
-        let result = self.symbolic.factorize_numeric_llt::<f64>(
+        let ok = numeric_llt(
+            &self.symbolic,
+            &mut self.scratch,
+            self.permuted.symbolic(),
+            &self.permuted_values,
             &mut self.values,
-            mat,
-            Side::Lower,
-            LltRegularization::default(),
             par,
-            MemStack::new(mem),
-            Default::default(),
-        );
-        match result {
-            Ok(_) => {
-                self.stored = Stored::Llt;
-                Ok(true)
-            }
-            // The only failure of the numeric phase is a non-positive pivot.
-            Err(_) => {
-                self.stored = Stored::None;
-                Ok(false)
-            }
-        }
+        )?;
+        self.stored = if ok { Stored::Llt } else { Stored::None };
+        Ok(ok)
     }
 
     /// Numeric `L D L^T` without pivoting, in the order fixed by the symbolic analysis. Meant for
@@ -532,6 +507,31 @@ impl SparseFactor {
             }
         }
     }
+}
+
+/// faer's numeric `L L^T` of the lower triangle `values` (pattern `lower`, in elimination order)
+/// into `factor`, in the precision `T`, with the workspace kept in `scratch`. `Ok(false)` on a
+/// non-positive pivot, the numeric phase's only failure.
+fn numeric_llt<T: faer::traits::RealField>(
+    symbolic: &SymbolicCholesky<usize>,
+    scratch: &mut Option<MemBuffer>,
+    lower: SymbolicSparseColMatRef<'_, usize>,
+    values: &[T],
+    factor: &mut [T],
+    par: Par,
+) -> Result<bool> {
+    let req = symbolic.factorize_numeric_llt_scratch::<T>(par, Default::default());
+    let mem = scratch_of(scratch, req)?;
+    let result = symbolic.factorize_numeric_llt::<T>(
+        factor,
+        SparseColMatRef::new(lower, values),
+        Side::Lower,
+        LltRegularization::default(),
+        par,
+        MemStack::new(mem),
+        Default::default(),
+    );
+    Ok(result.is_ok())
 }
 
 /// `n` zeros in memory that has been written. A freshly allocated zero vector is usually mapped
