@@ -394,7 +394,7 @@ impl SparseFactor {
     /// Solves `A x = rhs` in place with the stored factorisation.
     pub fn solve_in_place(&self, rhs: &mut [f64]) {
         if self.stored == Stored::LltSingle {
-            return self.solve_single_in_place(rhs);
+            return self.solve_single_in_place(rhs, false);
         }
         let mut permuted: Vec<f64> = self.order.iter().map(|&i| rhs[i]).collect();
         match (self.symbolic.raw(), &self.split, self.stored) {
@@ -408,29 +408,29 @@ impl SparseFactor {
         }
     }
 
-    /// [`SparseFactor::solve_in_place`] with the single-precision factor: the right-hand side is
-    /// rounded to single precision too (its error is the factor's).
-    fn solve_single_in_place(&self, rhs: &mut [f64]) {
-        let b: Vec<f64> = self.order.iter().map(|&i| rhs[i]).collect();
-        for (&i, v) in self.order.iter().zip(self.solve_single_permuted(&b)) {
-            rhs[i] = v;
-        }
-    }
-
     /// [`SparseFactor::solve_in_place`], followed by one step of iterative refinement when the
     /// factorisation is in single precision: `x += A^{-1} (b - A x)` with the residual in double
     /// precision against the matrix that was factored. The relative error, `e` (about `1e-7`
     /// times the condition number) after the plain solve, becomes about `e^2`, for the cost of a
     /// second solve and a matrix-vector product.
     pub fn solve_refined_in_place(&self, rhs: &mut [f64]) {
-        if self.stored != Stored::LltSingle {
-            return self.solve_in_place(rhs);
+        if self.stored == Stored::LltSingle {
+            self.solve_single_in_place(rhs, true);
+        } else {
+            self.solve_in_place(rhs);
         }
+    }
+
+    /// [`SparseFactor::solve_in_place`] with the single-precision factor (the right-hand side is
+    /// rounded to single precision too: its error is the factor's), refined once if `refine`.
+    fn solve_single_in_place(&self, rhs: &mut [f64], refine: bool) {
         let b: Vec<f64> = self.order.iter().map(|&i| rhs[i]).collect();
         let mut x = self.solve_single_permuted(&b);
-        let residual = self.permuted_residual(&b, &x);
-        for (x, dx) in x.iter_mut().zip(self.solve_single_permuted(&residual)) {
-            *x += dx;
+        if refine {
+            let residual = self.permuted_residual(&b, &x);
+            for (x, dx) in x.iter_mut().zip(self.solve_single_permuted(&residual)) {
+                *x += dx;
+            }
         }
         for (&i, v) in self.order.iter().zip(x) {
             rhs[i] = v;
