@@ -62,6 +62,14 @@ def test_bad_contact_settings_are_named():
             body.set_contact(dhat=dhat)
     with pytest.raises(sf.InputError, match="unknown setting 'd_hat'"):
         body.set_contact(d_hat=1e-3)
+    assert body.contact_settings["adaptive_stiffness"] is True
+    with pytest.raises(sf.ParameterError, match="adaptive_stiffness: expected True or False, got 'no'") as info:
+        body.set_contact(adaptive_stiffness="no")
+    assert info.value.parameter == "adaptive_stiffness"
+    body.set_contact(adaptive_stiffness=False)
+    assert body.contact_settings["adaptive_stiffness"] is False
+    body.set_contact(adaptive_stiffness=None)
+    assert body.contact_settings["adaptive_stiffness"] is True
     with pytest.raises(sf.InputError, match="obstacle"):
         body.add_obstacle("a table")  # type: ignore[arg-type]
     assert body.obstacles == () and body.dhat is None
@@ -139,6 +147,7 @@ def test_a_scene_resting_on_a_table_runs_and_reports_the_contact(tmp_path):
 @pytest.mark.parametrize(("obstacle", "contact", "names"), [
     ("plane = { point = [0, 0, 0.05], normal = [0, 0, 1] }", "", "obstacle"),
     ("plane = { point = [0, 0, 0], normal = [0, 0, 1] }", "[contact]\ndhat = 0.0", "dhat"),
+    ("plane = { point = [0, 0, 0], normal = [0, 0, 1] }", "[contact]\nadaptive_stiffness = 1", "adaptive_stiffness"),
     ("sphere = { center = [0, 0, -1], radius = -0.5 }", "", "radius"),
 ])
 def test_a_bad_scene_exits_2_naming_the_key(tmp_path, capsys, obstacle, contact, names):

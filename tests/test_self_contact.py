@@ -95,8 +95,10 @@ box = { min = [-1e-9, -1, -1], max = [1e-9, 1, 1] }
 
 [contact]
 self_contact = true
+adaptive_stiffness = false
 """, encoding="utf-8")
-    assert sf.Scene.load(scene).body.contact_settings["self_contact"] is True
+    settings = sf.Scene.load(scene).body.contact_settings
+    assert settings["self_contact"] is True and settings["adaptive_stiffness"] is False
 
 
 # ---------------------------------------------------------------------------

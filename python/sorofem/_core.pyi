@@ -68,6 +68,7 @@ class _Contact(_ContactForces):
 class _ContactSettings(TypedDict):
     dhat: float  # m
     stiffness: float | None  # J/m^4; None before the first solve
+    adaptive_stiffness: bool
     n_obstacles: int
 
 class _TrajectoryContact(TypedDict):
@@ -373,11 +374,13 @@ class Model:
         friction_slip: float | None = None,
         friction_velocity: float | None = None,
         self_contact: bool = False,
+        adaptive_stiffness: bool = True,
     ) -> None:
         """Set (replace) the obstacles (see check_obstacle) and the contact settings: dhat (m),
         reference barrier stiffness (J/m^4), static friction slip (m), dynamic friction velocity
-        (m/s), self-contact of the surface; None takes the default. An empty list without
-        self-contact removes contact."""
+        (m/s), self-contact of the surface, whether the barrier stiffness adapts (IPC) or stays
+        at the reference; None takes the default. An empty list without self-contact removes
+        contact."""
     def contact_settings(self) -> _ContactSettings | None: ...
     def contact_forces(self, positions: _F) -> _ContactForces | None:
         """Contact forces at node positions (n, 3); None without obstacles."""

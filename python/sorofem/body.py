@@ -69,10 +69,13 @@ class ObstaclePlacement:
                 "path": None if self.path is None else self.path.tolist()}
 
 
-#: Contact settings :meth:`Body.set_contact` takes, with their units ("" for the switch).
+#: Contact settings :meth:`Body.set_contact` takes, with their units ("" for the switches).
 CONTACT_SETTINGS: dict[str, str] = {
     "dhat": "m", "stiffness": "J/m^4", "friction_slip": "m", "friction_velocity": "m/s", "self_contact": "",
+    "adaptive_stiffness": "",
 }
+#: The contact settings that are switches, with their defaults.
+CONTACT_SWITCHES: dict[str, bool] = {"self_contact": False, "adaptive_stiffness": True}
 
 
 class Body:
@@ -165,7 +168,7 @@ class Body:
         # on the Cable or through the body's setters, wins).
         self._cable_values_taken: list[tuple[float, float]] = []
         self._obstacles: list[ObstaclePlacement] = []
-        self._contact: dict[str, float | bool | None] = dict.fromkeys(CONTACT_SETTINGS) | {"self_contact": False}
+        self._contact: dict[str, float | bool | None] = dict.fromkeys(CONTACT_SETTINGS) | CONTACT_SWITCHES
         # The activation distance in force (from the core's check of the obstacles).
         self._dhat: float | None = None
         # What the extension's model was last given for contact (set again when it changes): a
@@ -581,14 +584,25 @@ class Body:
             and edge-edge pairs of the surface that share no vertex). Default ``False``. The
             self-contact forces are part of ``result.contact_forces`` (they sum to zero) and
             its active pairs of ``result.active_contacts``.
+        adaptive_stiffness : bool or None
+            Whether the barrier stiffness adapts as in IPC (balanced against the other forces at
+            each time step's start and doubled while gaps keep shrinking, within ``[stiffness,
+            100 stiffness]``) or stays at ``stiffness``. Default ``True``. A fixed stiffness
+            makes every step a smooth function of the parameters and the state it starts from,
+            so that :func:`sorofem.trajectory_gradient` through contact is exact (with the
+            adaptive one it warns, :class:`sorofem.inverse.BarrierStiffnessWarning`, where a
+            balanced stiffness is held fixed). Without ``stiffness`` the fixed value is the
+            default one, taken from the material at the body's first solve: the derivatives
+            hold it there, as the body's later solves do.
 
         Raises
         ------
         InputError
             An unknown setting.
         ParameterError
-            A value that is not finite and > 0, a ``self_contact`` that is not a bool, or a body
-            whose surface touches itself at rest (with self-contact).
+            A value that is not finite and > 0, a ``self_contact`` or ``adaptive_stiffness``
+            that is not a bool, or a body whose surface touches itself at rest (with
+            self-contact).
 
         Examples
         --------
@@ -603,10 +617,10 @@ class Body:
         for name, value in settings.items():
             if name not in CONTACT_SETTINGS:
                 raise InputError(f"set_contact: unknown setting {name!r}; expected one of {list(CONTACT_SETTINGS)}")
-            if name == "self_contact":
+            if name in CONTACT_SWITCHES:
                 if value is not None and not isinstance(value, (bool, np.bool_)):
-                    raise ParameterError(f"self_contact: expected True or False, got {value!r}", name)
-                merged[name] = bool(value)
+                    raise ParameterError(f"{name}: expected True or False, got {value!r}", name)
+                merged[name] = CONTACT_SWITCHES[name] if value is None else bool(value)
             else:
                 merged[name] = None if value is None else positive_scalar(value, name)
         self._check_contact(self._obstacles, merged)

@@ -278,3 +278,48 @@ fn a_rising_floor_lifts_a_block_resting_on_it() {
     let frame = trajectory.contact.last().unwrap();
     assert_eq!(frame.translations[0], [0.0, 0.0, rise]);
 }
+
+/// A block falls onto a floor and rests there. With the adaptive stiffness, IPC balances it
+/// against the block's weight and inertia at the steps' starts, above `kappa_ref`; with
+/// `adaptive_stiffness: false` it stays at `kappa_ref` in every step, and the block still never
+/// passes through the floor.
+#[test]
+fn a_fixed_barrier_stiffness_stays_at_its_reference_through_a_landing() {
+    let reference = 1e8;
+    let mut last = Vec::new();
+    for adaptive_stiffness in [true, false] {
+        let mut model = block(0.04, 3, [0.0, 0.0, 0.001], 1e5, 1000.0);
+        model
+            .set_contact(ContactSetup {
+                obstacles: vec![spec(
+                    Obstacle::Plane(Plane::try_new([0.0; 3], [0.0, 0.0, 1.0]).unwrap()),
+                    0.5,
+                    Vec::new(),
+                )],
+                stiffness: Some(reference),
+                adaptive_stiffness,
+                ..Default::default()
+            })
+            .unwrap();
+        model.set_contact_audit(true);
+        let trajectory = run(&mut model, [0.0, 0.0, -G], 0.005, 20, None);
+        assert!(
+            trajectory.iterate_min_distances.iter().all(|&d| d > 0.0),
+            "an iterate touched the floor"
+        );
+        assert!(
+            trajectory
+                .iterate_min_distances
+                .iter()
+                .any(|&d| d.is_finite()),
+            "never came within dhat"
+        );
+        last.push(model.contact().unwrap().stiffness());
+    }
+    println!(
+        "last step's kappa: adaptive {:.3e}, fixed {:.3e}",
+        last[0], last[1]
+    );
+    assert!(last[0] > 1.5 * reference, "{last:?}");
+    assert_eq!(last[1], reference);
+}

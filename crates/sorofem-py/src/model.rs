@@ -276,9 +276,10 @@ impl Model {
     /// Sets (replaces) the obstacles: a list of dicts (see the binding's `obstacle_spec`:
     /// "kind" and its geometry, "friction", "path"), the activation distance `dhat` (m), the
     /// reference barrier stiffness (J/m^4), the static friction slip (m) and the dynamic friction
-    /// velocity (m/s), and whether the body's surface may touch itself; `None` takes the core's
-    /// defaults. An empty list without self-contact removes contact.
-    #[pyo3(signature = (obstacles, dhat = None, stiffness = None, friction_slip = None, friction_velocity = None, self_contact = false))]
+    /// velocity (m/s), whether the body's surface may touch itself and whether the barrier
+    /// stiffness adapts; `None` takes the core's defaults. An empty list without self-contact
+    /// removes contact.
+    #[pyo3(signature = (obstacles, dhat = None, stiffness = None, friction_slip = None, friction_velocity = None, self_contact = false, adaptive_stiffness = true))]
     #[allow(clippy::too_many_arguments)] // the keyword arguments of the Python call
     fn set_contact(
         &mut self,
@@ -289,6 +290,7 @@ impl Model {
         friction_slip: Option<f64>,
         friction_velocity: Option<f64>,
         self_contact: bool,
+        adaptive_stiffness: bool,
     ) -> PyResult<()> {
         let setup = sorofem_core::contact::ContactSetup {
             obstacles: crate::contact::obstacle_specs(py, obstacles)?,
@@ -297,13 +299,14 @@ impl Model {
             friction_slip,
             friction_velocity,
             self_contact,
+            adaptive_stiffness,
         };
         let inner = &mut self.inner;
         guarded(py, || inner.set_contact(setup))
     }
 
     /// The contact settings in force: {"dhat": m, "stiffness": J/m^4 or None before the first
-    /// solve, "n_obstacles"}, or None without obstacles.
+    /// solve, "adaptive_stiffness", "n_obstacles"}, or None without obstacles.
     fn contact_settings<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
         let Some(contact) = self.inner.contact() else {
             return Ok(None);
@@ -311,6 +314,7 @@ impl Model {
         let d = PyDict::new(py);
         d.set_item("dhat", contact.dhat())?;
         d.set_item("stiffness", contact.reference_stiffness())?;
+        d.set_item("adaptive_stiffness", contact.adaptive_stiffness())?;
         d.set_item("n_obstacles", contact.n_obstacles())?;
         Ok(Some(d))
     }

@@ -45,7 +45,9 @@ class BarrierStiffnessWarning(UserWarning):
     """Trajectory derivatives through contact hold IPC's barrier stiffness at the value each
     step converged with; in steps that ended in contact with a stiffness balanced inside its
     bounds, its change with the parameters is missing, and the derivatives are approximate
-    (an error of the order of the gap's change, a fraction of ``dhat``, against the motion)."""
+    (an error of the order of the gap's change, a fraction of ``dhat``, against the motion).
+    ``body.set_contact(adaptive_stiffness=False)`` holds the stiffness fixed in the simulation
+    too, and the derivatives are then exact."""
 
 
 def warn_balanced_contact(steps: int, total: int) -> None:
@@ -54,8 +56,9 @@ def warn_balanced_contact(steps: int, total: int) -> None:
     if steps > 0:
         warnings.warn(
             f"{steps} of {total} time steps ended in contact with a barrier stiffness balanced inside its bounds: "
-            "the trajectory derivatives hold it fixed there, so they are approximate (a stiffer barrier, "
-            "body.set_contact(stiffness=...), or a smaller dhat makes the missing part smaller)",
+            "the trajectory derivatives hold it fixed there, so they are approximate; "
+            "body.set_contact(adaptive_stiffness=False) fixes it in the simulation too and makes them exact "
+            "(a stiffer barrier, body.set_contact(stiffness=...), or a smaller dhat makes the missing part smaller)",
             BarrierStiffnessWarning,
             stacklevel=3,
         )
@@ -264,7 +267,9 @@ def trajectory_gradient(
     -----
     BarrierStiffnessWarning
         Some steps ended in contact with a barrier stiffness balanced inside its bounds: the
-        gradient holds it fixed there and is approximate.
+        gradient holds it fixed there and is approximate. With
+        ``body.set_contact(adaptive_stiffness=False)`` the stiffness is fixed in the
+        simulation too, and the gradient through contact is exact.
 
     Examples
     --------

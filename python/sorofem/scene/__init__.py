@@ -101,6 +101,9 @@ Schema
                                # from an obstacle (default: 1 % of the mean boundary edge length), m
     # self_contact = true      # the body's boundary surface may touch itself (frictionless; its forces are part
                                # of the contact forces and sum to zero) (default false)
+    adaptive_stiffness = true   # the barrier stiffness adapts as in IPC (balanced at each time step's start,
+                                # within [stiffness, 100 stiffness]); false keeps it at stiffness, which makes
+                                # trajectory gradients through contact exact
 
     [dynamics]                 # optional: Integrate in time (implicit Euler, lumped mass; density > 0) instead of
                                # a static solve.

@@ -379,6 +379,9 @@ _CONTACT = Table(
         "self_contact": Field(Boolean(), "the body's boundary surface may touch itself (frictionless; its forces "
                               "are part of the contact forces and sum to zero)", default=False, example=True,
                               commented=True),
+        "adaptive_stiffness": Field(Boolean(), "the barrier stiffness adapts as in IPC (balanced at each time "
+                                    "step's start, within [stiffness, 100 stiffness]); false keeps it at stiffness, "
+                                    "which makes trajectory gradients through contact exact", default=True),
     },
     doc="Contact settings: the [[obstacle]] entries' and the body's contact with itself (sorofem.Body.set_contact).",
 )

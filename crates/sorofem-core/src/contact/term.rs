@@ -58,7 +58,7 @@ pub struct ObstacleSpec {
 }
 
 /// What a model's contact is made of, as [`crate::Model::set_contact`] takes it.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct ContactSetup {
     pub obstacles: Vec<ObstacleSpec>,
     /// Activation distance (m); default [`DHAT_PER_EDGE`] times the mean boundary edge length.
@@ -72,6 +72,27 @@ pub struct ContactSetup {
     pub friction_velocity: Option<f64>,
     /// Whether the body's boundary surface may touch itself (frictionless self-contact).
     pub self_contact: bool,
+    /// Whether the barrier stiffness adapts (IPC: balanced at each solve's or step's start,
+    /// doubled while gaps keep shrinking, within `[kappa_ref, MAX_STIFFNESS_RATIO kappa_ref]`)
+    /// or stays at `kappa_ref`. A fixed stiffness makes every solve a smooth function of the
+    /// parameters and of the start state, so that trajectory derivatives through contact are
+    /// exact; the adaptive one converges more robustly where gaps close fast.
+    pub adaptive_stiffness: bool,
+}
+
+impl Default for ContactSetup {
+    /// No obstacle, no self-contact, the defaults of every setting, an adaptive stiffness.
+    fn default() -> Self {
+        ContactSetup {
+            obstacles: Vec::new(),
+            dhat: None,
+            stiffness: None,
+            friction_slip: None,
+            friction_velocity: None,
+            self_contact: false,
+            adaptive_stiffness: true,
+        }
+    }
 }
 
 /// The result of one contact pass: energy (J; `+inf` when a stencil touches) and the smallest
@@ -119,6 +140,8 @@ pub struct ContactTerm {
     /// The barrier stiffness of the current solve (J/m^4), and the one solves start from.
     stiffness: f64,
     reference_stiffness: Option<f64>,
+    /// See [`ContactSetup::adaptive_stiffness`].
+    adaptive_stiffness: bool,
     friction_slip: f64,
     friction_velocity: f64,
     /// The lagged friction stencils of the current step, and their slip `eps_u` (m).
@@ -206,6 +229,7 @@ impl ContactTerm {
             dhat,
             stiffness: reference_stiffness.unwrap_or(1.0),
             reference_stiffness,
+            adaptive_stiffness: setup.adaptive_stiffness,
             friction_slip,
             friction_velocity,
             friction_stencils: Vec::new(),
@@ -307,13 +331,24 @@ impl ContactTerm {
         force / (-barrier_gradient(s * s, self.dhat * self.dhat) * 2.0 * s)
     }
 
-    /// The range the adaptive stiffness moves in: `[kappa_ref, 100 kappa_ref]`.
+    /// The range the adaptive stiffness moves in: `[kappa_ref, 100 kappa_ref]`; `kappa_ref`
+    /// alone when it does not adapt ([`ContactSetup::adaptive_stiffness`]).
     pub fn stiffness_bounds(&self) -> StiffnessBounds {
         let min = self.reference_stiffness.unwrap_or(self.stiffness);
+        let ratio = if self.adaptive_stiffness {
+            MAX_STIFFNESS_RATIO
+        } else {
+            1.0
+        };
         StiffnessBounds {
             min,
-            max: MAX_STIFFNESS_RATIO * min,
+            max: ratio * min,
         }
+    }
+
+    /// See [`ContactSetup::adaptive_stiffness`].
+    pub fn adaptive_stiffness(&self) -> bool {
+        self.adaptive_stiffness
     }
 
     /// IPC's update after an accepted Newton iterate (minimum squared distances before and after
