@@ -231,7 +231,9 @@ def trajectory_gradient(
         and its contact (obstacles, self-contact) are differentiated through time, contact
         without friction (an obstacle with ``friction > 0`` is refused): the barrier stiffness
         is taken as fixed at the value each step converged with (IPC balances it at every
-        step's start; its change with the parameters is not differentiated). A step that must
+        step's start; its change with the parameters is not differentiated, and is none with
+        ``body.set_contact(adaptive_stiffness=False)``, which keeps it fixed in the simulation
+        too: the gradient is then exact). A step that must
         be split to converge, or to let a moving obstacle pass, is refused (choose a smaller
         ``dt``).
     objective

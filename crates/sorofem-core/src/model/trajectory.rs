@@ -127,7 +127,8 @@ impl Model {
     /// Contact (obstacles, self-contact) is differentiated without friction: the barrier
     /// depends on the step's end only, its stiffness taken as fixed at the value each step
     /// converged with (IPC's stiffness is balanced at every step's start and may double within
-    /// it; its change with the parameters is not differentiated). Spring cables' dashpots are
+    /// it; its change with the parameters is not differentiated, and is none with a fixed
+    /// stiffness, [`crate::contact::ContactSetup::adaptive_stiffness`]). Spring cables' dashpots are
     /// differentiated, their coefficients among the parameters.
     ///
     /// Not differentiated (an error names them): friction, steps that must be halved to
