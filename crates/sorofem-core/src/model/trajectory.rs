@@ -319,11 +319,17 @@ impl Model {
         // a motion that would touch the body would split the step there.
         if let Some(contact) = &mut self.terms.contact {
             let end = (s + 1) as f64 * dt;
-            if contact.obstacle_motion_bound(&state.z, end, DEFAULT_MIN_SEPARATION) < 1.0 {
+            let bound = contact.obstacle_motion_bound(&state.z, end, DEFAULT_MIN_SEPARATION);
+            if bound < 1.0 {
+                // The fraction of the step the obstacle may move before it reaches the body
+                // held at the step's start: about the step length that would not be split here.
                 return Err(Error::invalid(
                     "dt",
                     "a time step over which no obstacle runs into the body (a trajectory gradient does not split steps)",
-                    format!("dt = {dt:.3e} s: in time step {s} (t = {:.4} s) an obstacle would touch the body", s as f64 * dt),
+                    format!(
+                        "dt = {dt:.3e} s: in time step {s} (t = {:.4} s) an obstacle would touch the body after {:.3} of its motion over the step (about {:.2e} s of it)",
+                        s as f64 * dt, bound, bound * dt
+                    ),
                 ));
             }
             contact.set_time(end);
