@@ -233,9 +233,9 @@ def trajectory_gradient(
         is taken as fixed at the value each step converged with (IPC balances it at every
         step's start; its change with the parameters is not differentiated, and is none with
         ``body.set_contact(adaptive_stiffness=False)``, which keeps it fixed in the simulation
-        too: the gradient is then exact). A step that must
-        be split to converge, or to let a moving obstacle pass, is refused (choose a smaller
-        ``dt``).
+        too: the gradient is then exact). A step that :func:`sorofem.simulate` splits (where
+        Newton fails, or a moving obstacle would run into the body over it) is split alike, and
+        differentiated through its halves.
     objective
         A callable ``J(positions (steps + 1, n_nodes, 3)) -> (value, dJ/dpositions (steps + 1,
         n_nodes, 3))`` (frame i at time ``i dt``); a :class:`~sorofem.Target` (``1/2 |r|^2`` at
@@ -253,7 +253,7 @@ def trajectory_gradient(
     tolerance
         Newton's relative tolerance of every step (tight by default: the adjoint is exact at
         converged states). Every step is solved by modified Newton (the factorisation kept
-        across steps, as ``method="modified"``), unsplit.
+        across steps, as ``method="modified"``).
     checkpoint_every
         Keep every this many states: memory ``steps / k + k + 1`` states besides the positions
         the objective reads; the backward sweep recomputes the states between two kept ones

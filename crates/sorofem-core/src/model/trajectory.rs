@@ -1,7 +1,8 @@
 //! The gradient of an objective of a whole trajectory by the discrete adjoint of its implicit
 //! Euler steps (docs/theory.md, "Trajectory adjoint").
 //!
-//! Step k (length h, free DOFs u, the mixed formulation's pressures among them) ends where its
+//! Step k (length h, free DOFs u, the mixed formulation's pressures among them; a sub-step of
+//! its own length where the simulation halved a step, see `sub_steps`) ends where its
 //! residual vanishes:
 //!
 //! ```text
@@ -24,7 +25,8 @@
 //!
 //! (`H_k = dr_k/du_{k+1}`, the step's own Hessian at its converged end, the dashpots' and the
 //! barrier's exact Hessians in it; taut displacement-controlled tendons border it as in
-//! [`crate::sensitivity`]), and
+//! [`crate::sensitivity`]; with equal lengths: where they differ the inertial coefficients are
+//! `M (1 / h_{k+1}^2 + 1 / (h_{k+1} h_k) + alpha_M / h_{k+1})` and `M / (h_{k+2} h_{k+1})`), and
 //! `dJ/dtheta = -sum_k lambda_k . dr_k/dtheta`, whose parameter derivatives come from the
 //! registry's [`crate::energy::ParamTerm`]s (at `z_{k+1}`, and at `z_k` for the start force),
 //! from the lumped mass (`density`) and from the damping coefficients.
@@ -42,10 +44,12 @@
 mod dashpot;
 mod forward;
 mod step_end;
+mod sub_steps;
 
 pub use forward::TrajectoryDirection;
 
 use self::step_end::{add_to, CABLES, ELASTIC};
+use self::sub_steps::SubStep;
 use super::dynamics::{
     Damping, DynamicsOptions, StepMethod, StepSetup, StepState, MAX_CONTRACTION,
 };
@@ -53,7 +57,6 @@ use super::system::FactorReuse;
 use super::{Loads, Model};
 use crate::assembly::Evaluation;
 use crate::cables::CableSlot;
-use crate::contact::ccd::DEFAULT_MIN_SEPARATION;
 use crate::energy::{HessianMode, TendonCommand};
 use crate::error::{check_finite, Error, Result};
 use crate::newton::NewtonOptions;
@@ -109,11 +112,13 @@ struct Checkpoint {
     tensions: Vec<f64>,
 }
 
-/// What a step's derivatives need of its converged end besides the state: the tendons' tensions
-/// and the barrier stiffness the step converged with (J/m^4; 0 without contact).
+/// What a step's derivatives need of its converged end besides the state: the tendons' tensions,
+/// the barrier stiffness the step converged with (J/m^4; 0 without contact) and the time (s,
+/// where the obstacles were).
 struct StepEnd<'a> {
     tensions: &'a [f64],
     barrier_stiffness: f64,
+    time: f64,
 }
 
 impl Model {
@@ -131,8 +136,9 @@ impl Model {
     /// stiffness, [`crate::contact::ContactSetup::adaptive_stiffness`]). Spring cables' dashpots are
     /// differentiated, their coefficients among the parameters.
     ///
-    /// Not differentiated (an error names them): friction, steps that must be halved to
-    /// converge (or to let a moving obstacle pass).
+    /// A step is halved as [`Model::simulate_with`] halves it (where Newton fails or a moving
+    /// obstacle would run into the body over it: `sub_steps`), and the derivatives follow its
+    /// sub-steps. Not differentiated (an error names it): friction.
     #[allow(clippy::too_many_arguments)]
     pub fn trajectory_gradient<F>(
         &mut self,
@@ -165,7 +171,7 @@ impl Model {
             balanced_contact_steps: 0,
         };
         let mut checkpoints = Vec::new();
-        let mut barrier_stiffness = Vec::with_capacity(steps);
+        let mut plans = Vec::with_capacity(steps);
         let mut reuse = FactorReuse::new(MAX_CONTRACTION);
         for (s, commands) in actuation.iter().enumerate() {
             if s % every == 0 {
@@ -174,12 +180,24 @@ impl Model {
                     tensions: self.tendon_tensions(),
                 });
             }
-            record
-                .iterations
-                .push(self.converged_step(&setup, &mut state, dt, s, commands, &mut reuse)?);
+            let mut balanced = false;
+            let (plan, iterations) = self.converged_sub_steps(
+                &setup,
+                &mut state,
+                dt,
+                s,
+                commands,
+                &mut reuse,
+                None,
+                |model, _, end, _| {
+                    balanced |= model.balanced_in_contact(&end.z);
+                    Ok(())
+                },
+            )?;
+            record.iterations.push(iterations);
             record.positions.push(self.node_positions(&state.z));
-            barrier_stiffness.push(self.barrier_stiffness());
-            record.balanced_contact_steps += usize::from(self.balanced_in_contact(&state.z));
+            record.balanced_contact_steps += usize::from(balanced);
+            plans.push(plan);
         }
         // The last state closes the last segment: no segment recomputes its own end.
         checkpoints.push(Checkpoint {
@@ -203,7 +221,7 @@ impl Model {
             dt,
             actuation,
             &checkpoints,
-            &barrier_stiffness,
+            &plans,
             every,
             &d_positions,
         );
@@ -302,53 +320,6 @@ impl Model {
         rest.iter().zip(z).map(|(x, u)| x + u).collect()
     }
 
-    /// One step solved to the tolerance, unsplit, by `setup`'s method, keeping the
-    /// factorisation in `reuse` across the steps of a run (modified Newton); its Newton
-    /// iterations.
-    fn converged_step(
-        &mut self,
-        setup: &StepSetup,
-        state: &mut StepState,
-        dt: f64,
-        s: usize,
-        commands: &[f64],
-        reuse: &mut FactorReuse,
-    ) -> Result<usize> {
-        self.set_step_commands(commands)?;
-        // The obstacles move to where they are at the step's end, as in `Model::integrate`;
-        // a motion that would touch the body would split the step there.
-        if let Some(contact) = &mut self.terms.contact {
-            let end = (s + 1) as f64 * dt;
-            let bound = contact.obstacle_motion_bound(&state.z, end, DEFAULT_MIN_SEPARATION);
-            if bound < 1.0 {
-                // The fraction of the step the obstacle may move before it reaches the body
-                // held at the step's start: about the step length that would not be split here.
-                return Err(Error::invalid(
-                    "dt",
-                    "a time step over which no obstacle runs into the body (a trajectory gradient does not split steps)",
-                    format!(
-                        "dt = {dt:.3e} s: in time step {s} (t = {:.4} s) an obstacle would touch the body after {:.3} of its motion over the step (about {:.2e} s of it)",
-                        s as f64 * dt, bound, bound * dt
-                    ),
-                ));
-            }
-            contact.set_time(end);
-        }
-        match self.time_step(setup, state, dt, reuse, &mut Vec::new()) {
-            Ok(report) => Ok(report.iterations),
-            Err(Error::NotConverged { mut report, .. }) => {
-                let message = format!(
-                    "time step {s} (t = {:.4} s) did not converge at dt = {dt:.3e} s (a trajectory gradient does not split steps: choose a smaller dt); last relative residuals: {:?}",
-                    s as f64 * dt,
-                    report.residual_history.iter().rev().take(5).rev().map(|r| format!("{r:.3e}")).collect::<Vec<_>>()
-                );
-                report.message = message.clone();
-                Err(Error::NotConverged { message, report })
-            }
-            Err(other) => Err(other),
-        }
-    }
-
     /// The adjoint sweep over the segments between checkpoints, last first.
     #[allow(clippy::too_many_arguments)]
     fn backward(
@@ -358,12 +329,14 @@ impl Model {
         dt: f64,
         actuation: &[Vec<f64>],
         checkpoints: &[Checkpoint],
-        barrier_stiffness: &[f64],
+        plans: &[Vec<SubStep>],
         every: usize,
         d_positions: &[f64],
     ) -> Result<TrajectoryGradient> {
         let steps = actuation.len();
         let n_free = setup.free.len();
+        let n3 = 3 * self.mesh.n_nodes();
+        let no_frame = vec![0.0; n3];
         let layout = {
             let load_terms = self.terms.loads(loads);
             ParamLayout::new(&self.terms.parameterised(&load_terms))
@@ -376,6 +349,8 @@ impl Model {
             cable_damping: vec![0.0; self.n_cables()],
             next: vec![0.0; n_free],
             after_next: vec![0.0; n_free],
+            next_h: dt,
+            after_next_h: dt,
             start_force_term: vec![0.0; n_free],
             elastic_end: None,
             start_weights: None,
@@ -396,28 +371,66 @@ impl Model {
             {
                 tendon.tension = t;
             }
+            // The segment's sub-step states, recomputed from its checkpoint with the forward
+            // pass's lengths; the last one's end is the next checkpoint.
             let mut states = vec![(state.clone(), checkpoint.tensions.clone())];
             let mut reuse = FactorReuse::new(MAX_CONTRACTION);
-            for (s, commands) in actuation.iter().enumerate().take(last - 1).skip(first) {
-                self.converged_step(setup, &mut state, dt, s, commands, &mut reuse)?;
-                states.push((state.clone(), self.tendon_tensions()));
+            for (s, commands) in actuation.iter().enumerate().take(last).skip(first) {
+                let plan = if s + 1 == last {
+                    &plans[s][..plans[s].len() - 1]
+                } else {
+                    &plans[s][..]
+                };
+                if plan.is_empty() {
+                    continue;
+                }
+                self.converged_sub_steps(
+                    setup,
+                    &mut state,
+                    dt,
+                    s,
+                    commands,
+                    &mut reuse,
+                    Some(plan),
+                    |model, _, end, _| {
+                        states.push((end.clone(), model.tendon_tensions()));
+                        Ok(())
+                    },
+                )?;
             }
             states.push((next.state.clone(), next.tensions.clone()));
-            for k in (first..last).rev() {
-                let (start, _) = &states[k - first];
-                let (end, tensions) = &states[k + 1 - first];
-                let frame = &d_positions[(k + 1) * 3 * self.mesh.n_nodes()..];
+            // Sub-steps before the segment (the index of the run's first is 0).
+            let before: usize = plans[..first].iter().map(Vec::len).sum();
+            let subs: Vec<(usize, usize, SubStep)> = (first..last)
+                .flat_map(|s| {
+                    let count = plans[s].len();
+                    plans[s]
+                        .iter()
+                        .enumerate()
+                        .map(move |(i, sub)| (s, count - 1 - i, *sub))
+                })
+                .collect();
+            for (i, &(s, remaining, sub)) in subs.iter().enumerate().rev() {
+                let (start, _) = &states[i];
+                let (end, tensions) = &states[i + 1];
+                // Only a step's last sub-step ends on a frame the objective reads.
+                let frame = if remaining == 0 {
+                    &d_positions[(s + 1) * n3..(s + 2) * n3]
+                } else {
+                    &no_frame[..]
+                };
                 let step_end = StepEnd {
                     tensions,
-                    barrier_stiffness: barrier_stiffness[k],
+                    barrier_stiffness: sub.barrier_stiffness,
+                    time: sub.end_time,
                 };
                 self.adjoint_step(
                     setup,
                     loads,
                     &layout,
-                    dt,
-                    k,
-                    &actuation[k],
+                    sub.h,
+                    (before + i, s),
+                    &actuation[s],
                     start,
                     end,
                     &step_end,
@@ -454,7 +467,7 @@ impl Model {
         loads: &Loads,
         layout: &ParamLayout,
         h: f64,
-        k: usize,
+        (k, step): (usize, usize),
         commands: &[f64],
         start: &StepState,
         end: &StepState,
@@ -501,13 +514,17 @@ impl Model {
             },
         )?;
 
+        // Step k + 1's residual depends on u_{k+1} through its inertia, M (u_{k+2} - u_{k+1}) /
+        // h_{k+1}^2 - M v_{k+1} / h_{k+1} with v_{k+1} = (u_{k+1} - u_k) / h_k, and step k + 2's
+        // through v_{k+2}: the steps' lengths differ where a step was split.
+        let (hn, han) = (sweep.next_h, sweep.after_next_h);
         let mut lambda: Vec<f64> = (0..n_free)
             .map(|f| {
                 let d = setup.free[f];
                 let m = setup.mass[f];
                 let objective = if d < n3 { d_frame[d] } else { 0.0 };
-                objective + (2.0 * m / (h * h) + alpha_m * m / h) * sweep.next[f]
-                    - m / (h * h) * sweep.after_next[f]
+                objective + m * (1.0 / (hn * hn) + 1.0 / (hn * h) + alpha_m / hn) * sweep.next[f]
+                    - m / (han * hn) * sweep.after_next[f]
                     + sweep.start_force_term[f]
             })
             .collect();
@@ -640,7 +657,7 @@ impl Model {
             .1;
         for (c, g) in pull_gradients {
             flat[pull_offset + c] += g;
-            sweep.actuation[k][c] += g;
+            sweep.actuation[step][c] += g;
         }
         for c in 0..self.n_cables() {
             let block = match self.cable_slot(c)? {
@@ -656,7 +673,7 @@ impl Model {
                 .find(|b| b.0 == block)
                 .expect("cable block")
                 .1;
-            sweep.actuation[k][c] += flat[offset + c];
+            sweep.actuation[step][c] += flat[offset + c];
         }
         for (total, v) in sweep.flat.iter_mut().zip(&flat) {
             *total += v;
@@ -672,6 +689,7 @@ impl Model {
             sweep.stiffness_damping -= l * (damped_force[f] - start_force) / h;
         }
         sweep.after_next = std::mem::replace(&mut sweep.next, lambda);
+        sweep.after_next_h = std::mem::replace(&mut sweep.next_h, h);
         Ok(())
     }
 }
@@ -683,9 +701,12 @@ struct Sweep {
     mass_damping: f64,
     stiffness_damping: f64,
     cable_damping: Vec<f64>,
-    /// `lambda_{k+1}` and `lambda_{k+2}` (free DOFs).
+    /// `lambda_{k+1}` and `lambda_{k+2}` (free DOFs), and the lengths of steps k + 1 and
+    /// k + 2 (s).
     next: Vec<f64>,
     after_next: Vec<f64>,
+    next_h: f64,
+    after_next_h: f64,
     /// `beta_K / h K_F(z_{k+1}) P lambda_{k+1}` and the dashpots' `c / h dL/dz(z_{k+1})
     /// (dL/dz(z_{k+2}) . lambda_{k+1})`.
     start_force_term: Vec<f64>,

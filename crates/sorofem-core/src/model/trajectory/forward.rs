@@ -9,6 +9,8 @@
 //!                                                                 du_0 = du_{-1} = 0
 //! ```
 //!
+//! (with the lengths equal; after a halved step, `M (1 / h_k^2 + 1 / (h_k h_{k-1}) +
+//! alpha_M / h_k) du_k - M / (h_k h_{k-1}) du_{k-1}`),
 //! with `H_k` the step's own Hessian at its converged end (the dashpots' and the contact
 //! barrier's in it; taut displacement-controlled tendons bordering it, their pulls held, as in
 //! [`crate::sensitivity`]), `K_F` the Hessian of the damped internal force and `D_k` the
@@ -55,8 +57,8 @@ impl Model {
     /// is all zeros).
     ///
     /// Contact and dashpots as in [`Model::trajectory_gradient`] (the barrier stiffness fixed
-    /// at each step's converged value); not differentiated (an error names them): friction,
-    /// steps that must be halved to converge.
+    /// at each step's converged value), halved steps through their sub-steps; not
+    /// differentiated (an error names it): friction.
     #[allow(clippy::too_many_arguments, clippy::type_complexity)]
     pub fn trajectory_sensitivity(
         &mut self,
@@ -113,33 +115,49 @@ impl Model {
                 self.start_of_run(&setup, initial_positions, initial_velocities)?;
             record.positions.push(self.node_positions(&state.z));
             let mut reuse = FactorReuse::new(MAX_CONTRACTION);
+            // The length of the sub-step before (the run's first has no predecessor: du_0 = 0).
+            let mut previous_h = dt;
             for (s, commands) in actuation.iter().enumerate() {
-                let start = state.clone();
-                let iterations =
-                    self.converged_step(&setup, &mut state, dt, s, commands, &mut reuse)?;
-                record.iterations.push(iterations);
-                record.positions.push(self.node_positions(&state.z));
-                record.balanced_contact_steps += usize::from(self.balanced_in_contact(&state.z));
-                let tensions = self.tendon_tensions();
-                let end = StepEnd {
-                    tensions: &tensions,
-                    barrier_stiffness: self.barrier_stiffness(),
-                };
-                self.tangent_step(
+                let mut balanced = false;
+                let (_, iterations) = self.converged_sub_steps(
                     &setup,
-                    loads,
-                    &layout,
+                    &mut state,
                     dt,
                     s,
-                    &start,
-                    &state,
-                    &end,
-                    &mut tangents,
+                    commands,
+                    &mut reuse,
+                    None,
+                    |model, start, end, sub| {
+                        balanced |= model.balanced_in_contact(&end.z);
+                        let tensions = model.tendon_tensions();
+                        let step_end = StepEnd {
+                            tensions: &tensions,
+                            barrier_stiffness: sub.barrier_stiffness,
+                            time: sub.end_time,
+                        };
+                        model.tangent_step(
+                            &setup,
+                            loads,
+                            &layout,
+                            (sub.h, previous_h),
+                            s,
+                            start,
+                            end,
+                            &step_end,
+                            &mut tangents,
+                        )?;
+                        previous_h = sub.h;
+                        // The next step's solve starts from the tensions it solved for, not
+                        // the scaled ones.
+                        for (tendon, &t) in model.terms.tendons.tendons.iter_mut().zip(&tensions) {
+                            tendon.tension = t;
+                        }
+                        Ok(())
+                    },
                 )?;
-                // The next step's solve starts from the tensions it solved for, not the scaled ones.
-                for (tendon, &t) in self.terms.tendons.tendons.iter_mut().zip(&tensions) {
-                    tendon.tension = t;
-                }
+                record.iterations.push(iterations);
+                record.positions.push(self.node_positions(&state.z));
+                record.balanced_contact_steps += usize::from(balanced);
                 for (frames, tangent) in changes.iter_mut().zip(&tangents) {
                     let mut frame = vec![0.0; n3];
                     for (&d, &v) in setup
@@ -167,15 +185,16 @@ impl Model {
         Ok((record, changes))
     }
 
-    /// Step k of the forward sweep: every direction's `du_{k+1}` from the step's Hessian at its
-    /// end.
+    /// Step k of the forward sweep (a sub-step of time step `k` where it was split; `previous_h`
+    /// the length of the one before): every direction's `du_{k+1}` from the step's Hessian at
+    /// its end.
     #[allow(clippy::too_many_arguments)]
     fn tangent_step(
         &mut self,
         setup: &StepSetup,
         loads: &Loads,
         layout: &ParamLayout,
-        h: f64,
+        (h, previous_h): (f64, f64),
         k: usize,
         start: &StepState,
         end: &StepState,
@@ -269,8 +288,10 @@ impl Model {
                         start_force = start_eval.gradient[f];
                     }
                     derivative += tangent.stiffness_damping * (damped_force[f] - start_force) / h;
-                    let previous = (2.0 * m / (h * h) + alpha_m * m / h) * tangent.current[f]
-                        - m / (h * h) * tangent.previous[f]
+                    let previous = m
+                        * (1.0 / (h * h) + 1.0 / (h * previous_h) + alpha_m / h)
+                        * tangent.current[f]
+                        - m / (h * previous_h) * tangent.previous[f]
                         + if displacement {
                             beta_k / h * start_stiffness[f]
                         } else {

@@ -69,7 +69,7 @@ impl Model {
             };
         }
         if let Some(contact) = &mut self.terms.contact {
-            contact.set_time((k + 1) as f64 * h);
+            contact.set_time(end.time);
             contact.set_stiffness(end.barrier_stiffness);
         }
         self.cover_self_contact(z1)?;
