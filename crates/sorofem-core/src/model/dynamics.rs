@@ -270,24 +270,13 @@ impl Model {
             while let Some((h, depth)) = pending.pop() {
                 // Obstacles move first, with the body where it is: a motion that would touch it
                 // splits the step.
+                if self.obstacle_splits_step(&state.z, sub_time + h, (s, time), (h, depth))? {
+                    trajectory.cutbacks += 1;
+                    pending.extend([(h / 2.0, depth + 1), (h / 2.0, depth + 1)]);
+                    continue;
+                }
                 if let Some(contact) = &mut self.terms.contact {
-                    let end = sub_time + h;
-                    if contact.obstacle_motion_bound(&state.z, end, DEFAULT_MIN_SEPARATION) < 1.0 {
-                        if depth < MAX_STEP_SPLITS {
-                            trajectory.cutbacks += 1;
-                            pending.push((h / 2.0, depth + 1));
-                            pending.push((h / 2.0, depth + 1));
-                            continue;
-                        }
-                        return Err(Error::invalid(
-                            "obstacles",
-                            "paths along which the obstacles do not run into the body faster than it can move away",
-                            format!(
-                                "time step {s} (t = {time:.4} s): an obstacle would touch the body even at dt = {h:.3e} s"
-                            ),
-                        ));
-                    }
-                    contact.set_time(end);
+                    contact.set_time(sub_time + h);
                     let slip = contact.friction_velocity() * h;
                     contact.lag_friction(&state.z, &state.z, slip);
                 }
@@ -317,32 +306,10 @@ impl Model {
                     }
                     Err(Error::NotConverged { .. }) if depth < MAX_STEP_SPLITS => {
                         trajectory.cutbacks += 1;
-                        pending.push((h / 2.0, depth + 1));
-                        pending.push((h / 2.0, depth + 1));
+                        pending.extend([(h / 2.0, depth + 1), (h / 2.0, depth + 1)]);
                     }
-                    Err(Error::NotConverged { mut report, .. }) => {
-                        // Without a residual the step never had a finite energy: its start state
-                        // (extrapolated from the last steps' velocities) inverts an element.
-                        let why = if report.residual_history.is_empty() {
-                            "the step's start state (extrapolated from the velocities) inverts an element, so its energy is not finite: the motion is too fast for this dt or step method".to_string()
-                        } else {
-                            format!(
-                                "last relative residuals: {:?}",
-                                report
-                                    .residual_history
-                                    .iter()
-                                    .rev()
-                                    .take(5)
-                                    .rev()
-                                    .map(|r| format!("{r:.3e}"))
-                                    .collect::<Vec<_>>()
-                            )
-                        };
-                        let message = format!(
-                            "time step {s} (t = {time:.4} s) did not converge even at dt = {h:.3e} s; {why}"
-                        );
-                        report.message = message.clone();
-                        return Err(Error::NotConverged { message, report });
+                    Err(Error::NotConverged { report, .. }) => {
+                        return Err(unconverged_step(report, s, time, h));
                     }
                     Err(other) => return Err(other),
                 }
@@ -367,6 +334,33 @@ impl Model {
             reuse,
         });
         Ok(trajectory)
+    }
+
+    /// Whether a sub-step of length `h` (halved `depth` times so far) of time step `s` (from
+    /// `time`, s) that ends at `end` (s) must be halved again: an obstacle would run into the
+    /// body, held at the full DOF vector `z`, over it. An error once it has been halved
+    /// [`MAX_STEP_SPLITS`] times.
+    pub(crate) fn obstacle_splits_step(
+        &self,
+        z: &[f64],
+        end: f64,
+        (s, time): (usize, f64),
+        (h, depth): (f64, usize),
+    ) -> Result<bool> {
+        let Some(contact) = &self.terms.contact else {
+            return Ok(false);
+        };
+        if !(contact.obstacle_motion_bound(z, end, DEFAULT_MIN_SEPARATION) < 1.0) {
+            return Ok(false);
+        }
+        if depth < MAX_STEP_SPLITS {
+            return Ok(true);
+        }
+        Err(Error::invalid(
+            "obstacles",
+            "paths along which the obstacles do not run into the body faster than it can move away",
+            format!("time step {s} (t = {time:.4} s): an obstacle would touch the body even at dt = {h:.3e} s"),
+        ))
     }
 
     /// Sets every cable's command of one step: `values[c]` is cable c's alpha (spring cables),
@@ -782,4 +776,24 @@ fn add_timings(a: &mut Timings, b: &Timings) {
     a.single_precision_factorizations += b.single_precision_factorizations;
     a.contact += b.contact;
     a.step_bound += b.step_bound;
+}
+
+/// The error of time step `s` (from `time`, s) whose Newton solve failed at the sub-step length
+/// `h` it may not be halved below, with its last residuals.
+pub(crate) fn unconverged_step(mut report: Box<SolveReport>, s: usize, time: f64, h: f64) -> Error {
+    // Without a residual the step never had a finite energy: its start state (extrapolated
+    // from the last steps' velocities) inverts an element.
+    let why = if report.residual_history.is_empty() {
+        "the step's start state (extrapolated from the velocities) inverts an element, so its energy is not finite: the motion is too fast for this dt or step method".to_string()
+    } else {
+        let last = report.residual_history.iter().rev().take(5).rev();
+        format!(
+            "last relative residuals: {:?}",
+            last.map(|r| format!("{r:.3e}")).collect::<Vec<_>>()
+        )
+    };
+    let message =
+        format!("time step {s} (t = {time:.4} s) did not converge even at dt = {h:.3e} s; {why}");
+    report.message = message.clone();
+    Error::NotConverged { message, report }
 }

@@ -7,9 +7,8 @@
 //! checkpoint instead of deciding again: its states agree with the forward pass's to the
 //! tolerance only, and a decision at its threshold could differ.
 
-use crate::contact::ccd::DEFAULT_MIN_SEPARATION;
 use crate::error::{Error, Result};
-use crate::model::dynamics::{StepSetup, StepState, MAX_STEP_SPLITS};
+use crate::model::dynamics::{unconverged_step, StepSetup, StepState, MAX_STEP_SPLITS};
 use crate::model::system::FactorReuse;
 use crate::model::Model;
 
@@ -53,24 +52,13 @@ impl Model {
         let (mut done, mut iterations, mut sub_time) = (Vec::new(), 0, time);
         while let Some((h, depth)) = pending.pop() {
             let end_time = sub_time + h;
+            if plan.is_none()
+                && self.obstacle_splits_step(&state.z, end_time, (s, time), (h, depth))?
+            {
+                pending.extend([(h / 2.0, depth + 1), (h / 2.0, depth + 1)]);
+                continue;
+            }
             if let Some(contact) = &mut self.terms.contact {
-                if plan.is_none() {
-                    let bound =
-                        contact.obstacle_motion_bound(&state.z, end_time, DEFAULT_MIN_SEPARATION);
-                    if bound < 1.0 {
-                        if depth < MAX_STEP_SPLITS {
-                            pending.extend([(h / 2.0, depth + 1), (h / 2.0, depth + 1)]);
-                            continue;
-                        }
-                        return Err(Error::invalid(
-                            "obstacles",
-                            "paths along which the obstacles do not run into the body faster than it can move away",
-                            format!(
-                                "time step {s} (t = {time:.4} s): an obstacle would touch the body even at dt = {h:.3e} s"
-                            ),
-                        ));
-                    }
-                }
                 contact.set_time(end_time);
             }
             let start = state.clone();
@@ -92,20 +80,8 @@ impl Model {
                     }
                     pending.extend([(h / 2.0, depth + 1), (h / 2.0, depth + 1)]);
                 }
-                Err(Error::NotConverged { mut report, .. }) => {
-                    let message = format!(
-                        "time step {s} (t = {time:.4} s) did not converge even at dt = {h:.3e} s; last relative residuals: {:?}",
-                        report
-                            .residual_history
-                            .iter()
-                            .rev()
-                            .take(5)
-                            .rev()
-                            .map(|r| format!("{r:.3e}"))
-                            .collect::<Vec<_>>()
-                    );
-                    report.message = message.clone();
-                    return Err(Error::NotConverged { message, report });
+                Err(Error::NotConverged { report, .. }) => {
+                    return Err(unconverged_step(report, s, time, h));
                 }
                 Err(other) => return Err(other),
             }
