@@ -383,6 +383,7 @@ def test_steps_a_moving_obstacle_splits_are_differentiated_through_their_sub_ste
     names = ["youngs_modulus", "density", "mass_damping", "stiffness_damping"]
     g = sf.trajectory_gradient(body, objective, names, dt=DT, steps=STEPS, gravity=G, damping=damping,
                                checkpoint_every=3, tolerance=TIGHT)
+    assert 0 < g.split_steps <= traj.cutbacks
 
     def value(t):
         return objective(simulated(rising_floor(formulation, E=t[0], rho=t[1]), damping=(t[2], t[3])).positions)[0]

@@ -110,6 +110,7 @@ def test_steps_halved_after_a_newton_failure_are_differentiated_through_their_su
     g = sf.trajectory_gradient(body, objective, ["youngs_modulus", "density", "mass_damping", "stiffness_damping"],
                                dt=DT, steps=STEPS, gravity=G, damping=damping, initial_velocity=v0, tolerance=TIGHT,
                                max_iterations=8, checkpoint_every=4)
+    assert 0 < g.split_steps <= run(theta).cutbacks
     assert g.value == pytest.approx(objective(run(theta).positions)[0], rel=1e-12)
     assert_fd(lambda t: objective(run(t).positions)[0], theta, g.vector)
 

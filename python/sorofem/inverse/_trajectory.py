@@ -91,6 +91,11 @@ class TrajectoryGradientResult:
     balanced_contact_steps
         Steps that ended in contact with a barrier stiffness balanced inside its bounds, where
         the gradient is approximate (see :class:`BarrierStiffnessWarning`); 0 without contact.
+    split_steps
+        Steps the run halved as :func:`sorofem.simulate` does (where Newton failed or a moving
+        obstacle would have run into the body), differentiated through their halves: the
+        gradient is that of the simulation wherever a small change of the parameters keeps
+        those halvings (a central difference across a change of them jumps).
     """
 
     value: float
@@ -98,6 +103,7 @@ class TrajectoryGradientResult:
     positions: NDArray[np.float64]
     iterations: NDArray[np.int64]
     balanced_contact_steps: int = 0
+    split_steps: int = 0
 
     @property
     def vector(self) -> NDArray[np.float64]:
@@ -363,4 +369,4 @@ def trajectory_gradient(
     balanced = int(out["balanced_contact_steps"])
     warn_balanced_contact(balanced, steps)
     return TrajectoryGradientResult(values[-1], gradient, np.asarray(out["positions"]), np.asarray(out["iterations"]),
-                                    balanced)
+                                    balanced, int(out["split_steps"]))

@@ -103,6 +103,9 @@ pub struct RecordedPositions {
     /// bounds: the derivatives hold it at that value, so they miss its change with the
     /// parameters there (at a bound, or without contact at the step's end, nothing is missed).
     pub balanced_contact_steps: usize,
+    /// Steps the run halved (see `sub_steps`): the derivatives are those of the simulation where
+    /// a small change of the parameters keeps the halvings.
+    pub split_steps: usize,
 }
 
 /// The state at the start of a step and the tendons' tensions there.
@@ -169,6 +172,7 @@ impl Model {
             positions: vec![self.node_positions(&state.z)],
             iterations: Vec::with_capacity(steps),
             balanced_contact_steps: 0,
+            split_steps: 0,
         };
         let mut checkpoints = Vec::new();
         let mut plans = Vec::with_capacity(steps);
@@ -197,6 +201,7 @@ impl Model {
             record.iterations.push(iterations);
             record.positions.push(self.node_positions(&state.z));
             record.balanced_contact_steps += usize::from(balanced);
+            record.split_steps += usize::from(plan.len() > 1);
             plans.push(plan);
         }
         // The last state closes the last segment: no segment recomputes its own end.

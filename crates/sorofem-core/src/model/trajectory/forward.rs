@@ -119,7 +119,7 @@ impl Model {
             let mut previous_h = dt;
             for (s, commands) in actuation.iter().enumerate() {
                 let mut balanced = false;
-                let (_, iterations) = self.converged_sub_steps(
+                let (plan, iterations) = self.converged_sub_steps(
                     &setup,
                     &mut state,
                     dt,
@@ -158,6 +158,7 @@ impl Model {
                 record.iterations.push(iterations);
                 record.positions.push(self.node_positions(&state.z));
                 record.balanced_contact_steps += usize::from(balanced);
+                record.split_steps += usize::from(plan.len() > 1);
                 for (frames, tangent) in changes.iter_mut().zip(&tangents) {
                     let mut frame = vec![0.0; n3];
                     for (&d, &v) in setup
