@@ -184,24 +184,16 @@ impl Model {
                     tensions: self.tendon_tensions(),
                 });
             }
-            let mut balanced = false;
-            let (plan, iterations) = self.converged_sub_steps(
+            let step = (s, commands.as_slice());
+            let plan = self.recorded_step(
                 &setup,
                 &mut state,
                 dt,
-                s,
-                commands,
+                step,
                 &mut reuse,
-                None,
-                |model, _, end, _| {
-                    balanced |= model.balanced_in_contact(&end.z);
-                    Ok(())
-                },
+                &mut record,
+                |_, _, _, _| Ok(()),
             )?;
-            record.iterations.push(iterations);
-            record.positions.push(self.node_positions(&state.z));
-            record.balanced_contact_steps += usize::from(balanced);
-            record.split_steps += usize::from(plan.len() > 1);
             plans.push(plan);
         }
         // The last state closes the last segment: no segment recomputes its own end.

@@ -118,17 +118,15 @@ impl Model {
             // The length of the sub-step before (the run's first has no predecessor: du_0 = 0).
             let mut previous_h = dt;
             for (s, commands) in actuation.iter().enumerate() {
-                let mut balanced = false;
-                let (plan, iterations) = self.converged_sub_steps(
+                let step = (s, commands.as_slice());
+                self.recorded_step(
                     &setup,
                     &mut state,
                     dt,
-                    s,
-                    commands,
+                    step,
                     &mut reuse,
-                    None,
+                    &mut record,
                     |model, start, end, sub| {
-                        balanced |= model.balanced_in_contact(&end.z);
                         let tensions = model.tendon_tensions();
                         let step_end = StepEnd {
                             tensions: &tensions,
@@ -155,10 +153,6 @@ impl Model {
                         Ok(())
                     },
                 )?;
-                record.iterations.push(iterations);
-                record.positions.push(self.node_positions(&state.z));
-                record.balanced_contact_steps += usize::from(balanced);
-                record.split_steps += usize::from(plan.len() > 1);
                 for (frames, tangent) in changes.iter_mut().zip(&tangents) {
                     let mut frame = vec![0.0; n3];
                     for (&d, &v) in setup

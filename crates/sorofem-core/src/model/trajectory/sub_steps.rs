@@ -12,6 +12,8 @@ use crate::model::dynamics::{unconverged_step, StepSetup, StepState, MAX_STEP_SP
 use crate::model::system::FactorReuse;
 use crate::model::Model;
 
+use super::RecordedPositions;
+
 /// One converged sub-step of a time step.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct SubStep {
@@ -87,5 +89,41 @@ impl Model {
             }
         }
         Ok((done, iterations))
+    }
+
+    /// Time step `step = (s, commands)` of a differentiated run's forward pass, by
+    /// [`Model::converged_sub_steps`] (deciding its halvings, `each` after every sub-step), with
+    /// its frame, iterations, halvings and balanced barrier stiffness added to `record`.
+    /// Returns its sub-steps.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn recorded_step(
+        &mut self,
+        setup: &StepSetup,
+        state: &mut StepState,
+        dt: f64,
+        (s, commands): (usize, &[f64]),
+        reuse: &mut FactorReuse,
+        record: &mut RecordedPositions,
+        mut each: impl FnMut(&mut Model, &StepState, &StepState, &SubStep) -> Result<()>,
+    ) -> Result<Vec<SubStep>> {
+        let mut balanced = false;
+        let (plan, iterations) = self.converged_sub_steps(
+            setup,
+            state,
+            dt,
+            s,
+            commands,
+            reuse,
+            None,
+            |model, start, end, sub| {
+                balanced |= model.balanced_in_contact(&end.z);
+                each(model, start, end, sub)
+            },
+        )?;
+        record.iterations.push(iterations);
+        record.positions.push(self.node_positions(&state.z));
+        record.balanced_contact_steps += usize::from(balanced);
+        record.split_steps += usize::from(plan.len() > 1);
+        Ok(plan)
     }
 }
