@@ -184,12 +184,11 @@ impl Model {
                     tensions: self.tendon_tensions(),
                 });
             }
-            let step = (s, commands.as_slice());
             let plan = self.recorded_step(
                 &setup,
                 &mut state,
                 dt,
-                step,
+                (s, commands.as_slice()),
                 &mut reuse,
                 &mut record,
                 |_, _, _, _| Ok(()),
@@ -398,20 +397,21 @@ impl Model {
             states.push((next.state.clone(), next.tensions.clone()));
             // Sub-steps before the segment (the index of the run's first is 0).
             let before: usize = plans[..first].iter().map(Vec::len).sum();
-            let subs: Vec<(usize, usize, SubStep)> = (first..last)
+            // (time step, whether the sub-step is its last, the sub-step)
+            let subs: Vec<(usize, bool, SubStep)> = (first..last)
                 .flat_map(|s| {
                     let count = plans[s].len();
                     plans[s]
                         .iter()
                         .enumerate()
-                        .map(move |(i, sub)| (s, count - 1 - i, *sub))
+                        .map(move |(i, sub)| (s, i + 1 == count, *sub))
                 })
                 .collect();
-            for (i, &(s, remaining, sub)) in subs.iter().enumerate().rev() {
+            for (i, &(s, last_of_step, sub)) in subs.iter().enumerate().rev() {
                 let (start, _) = &states[i];
                 let (end, tensions) = &states[i + 1];
                 // Only a step's last sub-step ends on a frame the objective reads.
-                let frame = if remaining == 0 {
+                let frame = if last_of_step {
                     &d_positions[(s + 1) * n3..(s + 2) * n3]
                 } else {
                     &no_frame[..]

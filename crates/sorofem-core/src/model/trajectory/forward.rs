@@ -118,12 +118,11 @@ impl Model {
             // The length of the sub-step before (the run's first has no predecessor: du_0 = 0).
             let mut previous_h = dt;
             for (s, commands) in actuation.iter().enumerate() {
-                let step = (s, commands.as_slice());
                 self.recorded_step(
                     &setup,
                     &mut state,
                     dt,
-                    step,
+                    (s, commands.as_slice()),
                     &mut reuse,
                     &mut record,
                     |model, start, end, sub| {
