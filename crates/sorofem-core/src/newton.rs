@@ -28,7 +28,8 @@ pub struct NewtonOptions {
     /// energy; see [`crate::energy::ElasticTerm::advance_pressures`]) rather than at
     /// `kappa c(J)`. Same solution, quadratic convergence, and fewer iterations when the body
     /// rotates (docs/theory.md, "Newton's method", has the counts). `false`: the exact Hessian
-    /// of the energy.
+    /// of the energy. Time steps that keep their factorisation (modified Newton, linearly
+    /// implicit) never use them (see `System::keep_factorizations`).
     pub pressure_iterates: bool,
     /// Asks the solve to stop ([`Error::Interrupted`]): polled at the start of every load step
     /// (and of every retry after a cut-back) and of every Newton iteration. Not a setting: it

@@ -559,7 +559,7 @@ impl Model {
         if setup.method != StepMethod::Newton {
             reuse.start_solve();
             reuse.refine = setup.method == StepMethod::LinearlyImplicit;
-            problem.reuse = Some(reuse.clone());
+            problem.keep_factorizations(reuse.clone());
         }
         if problem.model.terms.contact.is_some() {
             problem.contact = Some(ContactSolve::new(FrictionLag::Fixed, true));

@@ -50,7 +50,7 @@ pub(super) struct System<'a> {
     pub(super) constraints: TendonConstraints,
     /// How this solve treats the model's contact, and what it measured (when there is contact).
     pub(super) contact: Option<ContactSolve>,
-    /// Directions from a kept factorisation (dynamics), when set.
+    /// Directions from a kept factorisation (dynamics), when set ([`System::keep_factorizations`]).
     pub(super) reuse: Option<FactorReuse>,
 }
 
@@ -213,6 +213,15 @@ impl<'a> System<'a> {
 }
 
 impl System<'_> {
+    /// Takes directions from `reuse`'s kept factorisation. Pressure iterates only shape the
+    /// Hessians Newton builds, and a kept factorisation serves iterates whose Hessians are never
+    /// built: moving the iterates would cost an element pass per iteration for nothing, so the
+    /// Hessians built here take their volumetric stiffness at `kappa c(J)`.
+    pub(super) fn keep_factorizations(&mut self, reuse: FactorReuse) {
+        self.reuse = Some(reuse);
+        self.pressure_iterates = false;
+    }
+
     fn n_nodes(&self) -> usize {
         self.model.mesh.n_nodes()
     }
