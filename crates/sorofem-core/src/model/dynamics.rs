@@ -557,8 +557,7 @@ impl Model {
             &setup.newton,
         );
         if setup.method != StepMethod::Newton {
-            reuse.start_solve();
-            reuse.refine = setup.method == StepMethod::LinearlyImplicit;
+            reuse.start_solve(setup.method);
             problem.keep_factorizations(reuse.clone());
         }
         if problem.model.terms.contact.is_some() {

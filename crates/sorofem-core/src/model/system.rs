@@ -18,6 +18,7 @@ use std::time::Instant;
 
 mod reuse;
 mod tendon_state;
+mod warp;
 
 pub(crate) use reuse::FactorReuse;
 
@@ -582,7 +583,12 @@ impl NewtonProblem for System<'_> {
         timings.factorizations += 1;
         let taut = self.taut(z);
         let x = self.learns_secants().then(|| self.free_values(z));
+        let rotate = self.reuse.as_ref().is_some_and(|r| r.rotate);
+        let warp = (ok && rotate && self.contact.is_none() && self.constraints.is_empty())
+            .then(|| warp::WarpReference::new(&self.model.mesh, &z[..3 * self.n_nodes()]));
         if let Some(reuse) = &mut self.reuse {
+            reuse.warp = warp;
+            reuse.rotations = None;
             reuse.secants.clear();
             if let Some(x) = x {
                 reuse.secants.record(x, g);

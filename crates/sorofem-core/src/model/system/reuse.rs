@@ -1,10 +1,15 @@
-//! Modified Newton across the solves of a simulation: a kept factorisation, refined by the
-//! secant pairs of the current solve (L-BFGS with the kept factor as its initial inverse).
+//! Modified Newton across the solves of a simulation: a kept factorisation, rotated with the
+//! body and refined by the secant pairs of the current solve (L-BFGS with the rotated kept
+//! factor as its initial inverse).
 
+use super::warp::{rotate_nodes, WarpReference};
 use super::System;
 use crate::error::Result;
 use crate::linear::FactorKind;
+use crate::model::dynamics::StepMethod;
 use crate::report::Timings;
+use nalgebra::Matrix3;
+use std::time::Instant;
 
 /// The largest relative residual `|H x - g| / |g|` a single-precision factorisation's solve may
 /// leave for it to be kept (see `System::factor_kept`): at this level the error of its directions
@@ -72,21 +77,31 @@ impl System<'_> {
         {
             return None;
         }
+        if reuse.rotations.is_none() && reuse.warp.is_some() {
+            let t0 = Instant::now();
+            let u = &z[..3 * self.n_nodes()];
+            let rotations = (reuse.warp.as_ref()).map(|w| w.node_rotations(&self.model.mesh, u));
+            self.reuse.as_mut().expect("checked above").rotations = rotations;
+            timings.assembly += t0.elapsed().as_secs_f64();
+        }
+        let rotations = self.reuse.as_mut().and_then(|r| r.rotations.take());
         let d = if self.learns_secants() {
             let x = self.free_values(z);
             let reuse = self.reuse.as_mut().expect("checked above");
             reuse.secants.record(x, g);
             let secants = std::mem::take(&mut reuse.secants);
-            // solve_with_factor gives -H_0^{-1} q; the update needs +H_0^{-1} q.
+            // The rotated solve gives -H_0^{-1} q; the update needs +H_0^{-1} q.
             let d = secants.apply_inverse(g, |q| {
-                self.solve_with_factor(z, q, timings)
+                self.rotated_solve(z, q, rotations.as_deref(), timings)
                     .map(|d| d.into_iter().map(|v| -v).collect())
             });
             self.reuse.as_mut().expect("checked above").secants = secants;
-            d?.into_iter().map(|v| -v).collect()
+            d.map(|d| d.into_iter().map(|v| -v).collect())
         } else {
-            self.solve_with_factor(z, g, timings)?
+            self.rotated_solve(z, g, rotations.as_deref(), timings)
         };
+        self.reuse.as_mut().expect("checked above").rotations = rotations;
+        let d = d?;
         let usable = self.is_usable(&d, g);
         let reuse = self.reuse.as_mut().expect("checked above");
         if !usable {
@@ -98,11 +113,37 @@ impl System<'_> {
     }
 }
 
+impl System<'_> {
+    /// `-H_0^{-1} g` of the kept factorisation rotated with the body, `R K^{-1} R^T`
+    /// ([`super::warp`]); the plain kept solve without `rotations`.
+    fn rotated_solve(
+        &self,
+        z: &[f64],
+        g: &[f64],
+        rotations: Option<&[Matrix3<f64>]>,
+        timings: &mut Timings,
+    ) -> Option<Vec<f64>> {
+        let Some(rotations) = rotations else {
+            return self.solve_with_factor(z, g, timings);
+        };
+        let full_of_free = self.model.assembler.full_of_free();
+        let mut q = g.to_vec();
+        rotate_nodes(rotations, full_of_free, &mut q, true);
+        let mut d = self.solve_with_factor(z, &q, timings)?;
+        rotate_nodes(rotations, full_of_free, &mut d, false);
+        Some(d)
+    }
+}
+
 /// Modified Newton for a sequence of solves (the steps of a simulation): directions
 /// `d = -H_kept^{-1} g` from a factorisation kept across iterations and solves, until the
 /// residual falls by less than `max_ratio` in an iteration (or the kept factor gives no
 /// descent direction, or the active contacts changed); the next direction then factorises the
 /// Hessian at its iterate.
+///
+/// Without contact and displacement-controlled tendons (and with `rotate`), the kept factor is
+/// rotated with the body ([`super::warp`]): by the node rotations from where it was factorised to the current
+/// solve's first iterate that uses it.
 ///
 /// Where the merit is the energy (standard formulation, no displacement-controlled tendon, no
 /// contact), each direction corrects the kept factor by the secant pairs of the iterates since
@@ -135,6 +176,17 @@ pub(crate) struct FactorReuse {
     /// direction and keep its error, as a linearly implicit step does; iterations to a
     /// tolerance remove it anyway.
     pub(crate) refine: bool,
+    /// Whether the kept factorisation rotates with the body (modified Newton). Not for a
+    /// linearly implicit step: it keeps its one direction's error, and the rotation keeps
+    /// a factorisation for more steps, which on the hammerbot's swing multiplied that error.
+    pub(crate) rotate: bool,
+    /// The configuration the kept factorisation was computed at, for its rotation with the
+    /// body; `None` where that does not apply (contact, displacement-controlled tendons, no
+    /// `rotate`).
+    pub(crate) warp: Option<WarpReference>,
+    /// The node rotations from `warp` to the current solve's first kept-factor iterate (one
+    /// rotation per solve: the secant pairs follow the rest of the solve's drift).
+    pub(crate) rotations: Option<Vec<Matrix3<f64>>>,
 }
 
 impl FactorReuse {
@@ -149,13 +201,20 @@ impl FactorReuse {
             secants: SecantPairs::default(),
             double_precision: false,
             refine: false,
+            rotate: false,
+            warp: None,
+            rotations: None,
         }
     }
 
-    /// Forgets what belongs to one solve (the next has its own energy).
-    pub(crate) fn start_solve(&mut self) {
+    /// Forgets what belongs to one solve (the next has its own energy), and sets how a step
+    /// of `method` uses the kept factorisation.
+    pub(crate) fn start_solve(&mut self, method: StepMethod) {
+        self.refine = method == StepMethod::LinearlyImplicit;
+        self.rotate = method == StepMethod::Modified;
         self.last_norm = None;
         self.secants.clear();
+        self.rotations = None;
     }
 }
 
