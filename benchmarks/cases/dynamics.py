@@ -17,8 +17,9 @@ TABLES["dynamics"] = Table(
     "from rest in its rest shape under gravity (0, -9.8, 0): implicit Euler with lumped mass, "
     "Rayleigh damping alpha_M = 1.0 1/s, beta_K = 0, 1 s at dt = 10 ms (100 steps), Newton tolerance "
     "1e-8 per step, `sf.simulate` with each step method (`method=`: `newton` refactorises at every "
-    "iteration, `modified` (the default) keeps the factorisation across iterations and steps, "
-    "`linearly_implicit` takes one kept-factor iteration per step). Time = wall time of `Body`, `fix` and "
+    "iteration, `modified` (the default) keeps the factorisation across iterations and steps, rotated with "
+    "the body, `linearly_implicit` takes one kept-factor iteration per step); the `-fast` row is `modified` "
+    "at tolerance 1e-2, the fast mode of the real-time table. Time = wall time of `Body`, `fix` and "
     "`simulate` (one run). Factorisations = numeric factorisations of the step Hessian; single prec. = "
     "those of them in single precision (the kept ones; docs/theory.md, \"Dynamics\"). Tip deviation = "
     "the largest distance over the 101 frames between the tip's mean displacement and that of a "
@@ -29,6 +30,7 @@ TABLES["dynamics"] = Table(
     (
         col("case", "case", str),
         col("method", "method", str),
+        col("tolerance", "tolerance", lambda x: "-" if x is None else f"{x:g}"),
         col("dt [ms]", "dt", lambda x: "-" if x is None else f"{1e3 * x:g}"),
         col("steps", "steps"),
         Column("conv.", status),
@@ -54,6 +56,8 @@ DYNAMICS_MASS_DAMPING = 1.0
 
 
 REFERENCE_TOLERANCE = 1e-11
+#: The fast mode's tolerance (the real-time table's).
+FAST_TOLERANCE = 1e-2
 
 
 def _simulate_hammerbot(method: str, tolerance: float) -> tuple[Any, Any, float]:
@@ -74,13 +78,13 @@ def _tip_path(mesh: Any, traj: Any) -> np.ndarray:
     return np.array([tip_mean(mesh, frame - mesh.points) for frame in traj.positions])
 
 
-def _hammerbot_dynamics(method: str) -> Row:
+def _hammerbot_dynamics(method: str, tolerance: float = TOLERANCE) -> Row:
     import sorofem as sf
 
-    row: Row = {"dt": DYNAMICS_DT, "steps": DYNAMICS_STEPS, "method": method,
+    row: Row = {"dt": DYNAMICS_DT, "steps": DYNAMICS_STEPS, "method": method, "tolerance": tolerance,
                 "mass_damping": DYNAMICS_MASS_DAMPING, "api": "sorofem.simulate"}
     try:
-        mesh, traj, seconds = _simulate_hammerbot(method, TOLERANCE)
+        mesh, traj, seconds = _simulate_hammerbot(method, tolerance)
     except sf.ConvergenceError as err:
         row.update(converged=False, failure=str(err))
         return row
@@ -97,7 +101,7 @@ def _hammerbot_dynamics(method: str) -> Row:
         single_precision_factorizations=traj.single_precision_factorizations,
         max_residual=float(np.max(traj.residuals)), max_tip_deviation_percent=100 * float(deviation),
         cutbacks=int(traj.cutbacks), max_kinetic_energy=float(kinetic.max()), final_kinetic_energy=float(kinetic[-1]),
-        tip_displacement=tip[-1].tolist(), note=f"via {row['api']}, method={method!r}",
+        tip_displacement=tip[-1].tolist(), note=f"via {row['api']}, method={method!r}, tolerance={tolerance:g}",
     )
     body = sf.Body(mesh, sf.NeoHookean(**HAMMERBOT_MATERIAL))
     body.fix(hammerbot_mesh()[1])
@@ -119,3 +123,8 @@ def sorofem_hammerbot_dynamics_newton() -> Row:
 @case("sorofem/hammerbot-dynamics-1s-linearly-implicit", "dynamics", quick=True)
 def sorofem_hammerbot_dynamics_linearly_implicit() -> Row:
     return _hammerbot_dynamics("linearly_implicit")
+
+
+@case("sorofem/hammerbot-dynamics-1s-fast", "dynamics", quick=True)
+def sorofem_hammerbot_dynamics_fast() -> Row:
+    return _hammerbot_dynamics("modified", FAST_TOLERANCE)
