@@ -456,16 +456,20 @@ def simulate(
     save_every
         Save every this many steps (the initial and the last state are always saved).
     tolerance, max_iterations
-        Newton's relative residual tolerance and iteration limit per step.
+        Newton's relative residual tolerance and iteration limit per step. The fast mode is
+        ``method="modified"`` with a loose ``tolerance`` such as ``1e-2`` (each step converged
+        to 1 % of its load): on the hammerbot's swing its tip stays within 0.2 % of a
+        tight-tolerance run at about half the default's time (BENCHMARKS.md, "Dynamics").
     method
         How each step's minimisation is solved (see :data:`STEP_METHODS`): ``"modified"``
-        (default) keeps the Hessian's factorisation across iterations and steps and
-        refactorises where the residual falls by less than a quarter in an iteration;
-        ``"newton"`` refactorises at every iteration. Both converge every step to
+        (default) keeps the Hessian's factorisation across iterations and steps, rotated with
+        the body, and refactorises where the residual falls by less than a quarter in an
+        iteration; ``"newton"`` refactorises at every iteration. Both converge every step to
         ``tolerance``, so their trajectories agree to it. ``"linearly_implicit"`` takes one
-        iteration per step (SOFA's linearised implicit Euler): fast, less accurate and more
-        dissipative; each step's remaining residual is in :attr:`Trajectory.residuals`
-        (BENCHMARKS.md gives the accuracy on the hammerbot).
+        iteration per step (SOFA's linearised implicit Euler): less accurate and more
+        dissipative, with an error no tolerance controls (19 % of the hammerbot's tip motion,
+        6 % of a cantilever's; BENCHMARKS.md); each step's remaining residual is in
+        :attr:`Trajectory.residuals`.
     progress
         A progress line on stderr (steps done, simulated time, Newton iterations per step,
         cutbacks, elapsed time, ETA): ``None`` (default) only when stderr is a terminal and the
