@@ -557,7 +557,7 @@ impl Model {
             &setup.newton,
         );
         if setup.method != StepMethod::Newton {
-            reuse.start_solve(setup.method);
+            reuse.start_solve(setup.method == StepMethod::LinearlyImplicit);
             problem.keep_factorizations(reuse.clone());
         }
         if problem.model.terms.contact.is_some() {

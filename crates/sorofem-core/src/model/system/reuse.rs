@@ -6,7 +6,6 @@ use super::warp::{rotate_nodes, WarpReference};
 use super::System;
 use crate::error::Result;
 use crate::linear::FactorKind;
-use crate::model::dynamics::StepMethod;
 use crate::report::Timings;
 use nalgebra::Matrix3;
 use std::time::Instant;
@@ -207,11 +206,12 @@ impl FactorReuse {
         }
     }
 
-    /// Forgets what belongs to one solve (the next has its own energy), and sets how a step
-    /// of `method` uses the kept factorisation.
-    pub(crate) fn start_solve(&mut self, method: StepMethod) {
-        self.refine = method == StepMethod::LinearlyImplicit;
-        self.rotate = method == StepMethod::Modified;
+    /// Forgets what belongs to one solve (the next has its own energy), and sets how the step
+    /// uses the kept factorisation: a linearly implicit step's one direction is refined, modified
+    /// Newton's are rotated.
+    pub(crate) fn start_solve(&mut self, linearly_implicit: bool) {
+        self.refine = linearly_implicit;
+        self.rotate = !linearly_implicit;
         self.last_norm = None;
         self.secants.clear();
         self.rotations = None;
