@@ -110,9 +110,7 @@ impl System<'_> {
         reuse.reused += 1;
         Some(d)
     }
-}
 
-impl System<'_> {
     /// `-H_0^{-1} g` of the kept factorisation rotated with the body, `R K^{-1} R^T`
     /// ([`super::warp`]); the plain kept solve without `rotations`.
     fn rotated_solve(
@@ -141,8 +139,8 @@ impl System<'_> {
 /// Hessian at its iterate.
 ///
 /// Without contact and displacement-controlled tendons (and with `rotate`), the kept factor is
-/// rotated with the body ([`super::warp`]): by the node rotations from where it was factorised to the current
-/// solve's first iterate that uses it.
+/// rotated with the body ([`super::warp`]): by the node rotations from where it was factorised
+/// to the current solve's first iterate that uses it.
 ///
 /// Where the merit is the energy (standard formulation, no displacement-controlled tendon, no
 /// contact), each direction corrects the kept factor by the secant pairs of the iterates since
