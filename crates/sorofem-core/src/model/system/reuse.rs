@@ -76,11 +76,10 @@ impl System<'_> {
         {
             return None;
         }
-        if reuse.rotations.is_none() && reuse.warp.is_some() {
+        if let (None, Some(warp)) = (&reuse.rotations, &reuse.warp) {
             let t0 = Instant::now();
-            let u = &z[..3 * self.n_nodes()];
-            let rotations = (reuse.warp.as_ref()).map(|w| w.node_rotations(&self.model.mesh, u));
-            self.reuse.as_mut().expect("checked above").rotations = rotations;
+            let rotations = warp.node_rotations(&self.model.mesh, &z[..3 * self.n_nodes()]);
+            self.reuse.as_mut().expect("checked above").rotations = Some(rotations);
             timings.assembly += t0.elapsed().as_secs_f64();
         }
         let rotations = self.reuse.as_mut().and_then(|r| r.rotations.take());

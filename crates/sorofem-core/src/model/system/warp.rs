@@ -13,29 +13,11 @@ use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
 /// The configuration `x_k` of a kept factorisation, as what its node rotations need: each tet's
-/// inverse edge matrix `D(x_k)^{-1}`, `D(x) = [x_1 - x_0, x_2 - x_0, x_3 - x_0]` (1/m).
+/// inverse deformation gradient `F(x_k)^{-1}` (`F(x) F(x_k)^{-1} = D(x) D(x_k)^{-1}`, `D` the edge
+/// matrix `[x_1 - x_0, x_2 - x_0, x_3 - x_0]`).
 #[derive(Clone, Debug)]
 pub(crate) struct WarpReference {
-    inverse_edges: Vec<Matrix3<f64>>,
-}
-
-/// The edge matrix `D(x)` (m) of tet `e` at nodal displacements `u` (m, 3 n, node-major).
-fn edges(mesh: &TetMesh, u: &[f64], e: usize) -> Matrix3<f64> {
-    let tet = mesh.tets()[e];
-    let position = |a: usize| {
-        let (node, rest) = (tet[a], mesh.rest()[tet[a]]);
-        Vector3::new(
-            rest[0] + u[3 * node],
-            rest[1] + u[3 * node + 1],
-            rest[2] + u[3 * node + 2],
-        )
-    };
-    let origin = position(0);
-    Matrix3::from_columns(&[
-        position(1) - origin,
-        position(2) - origin,
-        position(3) - origin,
-    ])
+    inverse_gradients: Vec<Matrix3<f64>>,
 }
 
 /// The rotation of the polar decomposition `A = R S` of a matrix with positive determinant, by
@@ -63,10 +45,10 @@ impl WarpReference {
     /// weight in the rotations measured against it.
     pub(crate) fn new(mesh: &TetMesh, u: &[f64]) -> Self {
         WarpReference {
-            inverse_edges: (0..mesh.n_tets())
+            inverse_gradients: (0..mesh.n_tets())
                 .into_par_iter()
                 .map(|e| {
-                    edges(mesh, u, e)
+                    (mesh.deformation_gradient(e, u))
                         .try_inverse()
                         .unwrap_or_else(Matrix3::zeros)
                 })
@@ -75,13 +57,13 @@ impl WarpReference {
     }
 
     /// Per node (`n`), the rotation from the reference configuration to displacements `u`:
-    /// the polar rotation of `sum_t V_t D_t(x) D_t(x_k)^{-1}` over the tets `t` at the node
+    /// the polar rotation of `sum_t V_t F_t(x) F_t(x_k)^{-1}` over the tets `t` at the node
     /// (`V_t` rest volume), the identity where that sum has none.
     pub(crate) fn node_rotations(&self, mesh: &TetMesh, u: &[f64]) -> Vec<Matrix3<f64>> {
         let volumes = mesh.volumes();
         let tet_maps: Vec<Matrix3<f64>> = (0..mesh.n_tets())
             .into_par_iter()
-            .map(|e| volumes[e] * edges(mesh, u, e) * self.inverse_edges[e])
+            .map(|e| volumes[e] * mesh.deformation_gradient(e, u) * self.inverse_gradients[e])
             .collect();
         let mut sums = vec![Matrix3::zeros(); mesh.n_nodes()];
         for (tet, map) in mesh.tets().iter().zip(&tet_maps) {
