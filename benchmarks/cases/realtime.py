@@ -38,7 +38,8 @@ TABLES["realtime"] = Table(
     "Euler; the kept factorisation in single precision, each solve refined once). Single prec. = "
     "factorisations in single precision. Time = wall time of `Body`, `fix` and `simulate`, the median of the "
     "repeats (up to 5 runs in one process, while the time spent stays under 5 s, as in the dynamics table; "
-    "first run = the first of them); real-time factor = time / 1 s (< 1: faster than real time). Tip deviation = the largest distance over "
+    "first run = the first of them); real-time factor = time / 1 s (< 1: faster than real time). Tip "
+    "deviation = the largest distance over "
     "the 101 frames between the mean displacement of the x = 0.4 m face and that of a tight run (modified "
     "Newton, tolerance 1e-10), relative to the largest such displacement of that run. Tip = its mean "
     "z-displacement at t = 1 s.",
