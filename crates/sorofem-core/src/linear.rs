@@ -13,6 +13,7 @@ use faer::sparse::linalg::cholesky::{
 };
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par, Side};
+use std::sync::Arc;
 use supernodal::SolveSplit;
 
 /// The lower triangle (row >= column) of a symmetric sparse matrix in compressed-column form,
@@ -106,15 +107,9 @@ pub enum FactorKind {
 /// matrix every time (5 % of a hammerbot solve's profile).
 pub struct SparseFactor {
     kind: FactorKind,
-    symbolic: SymbolicCholesky<usize>,
+    analysis: Arc<Analysis>,
     values: Vec<f64>,
     stored: Stored,
-    /// `order[k]`: the unknown eliminated k-th.
-    order: Vec<usize>,
-    /// The lower triangle of `P A P^T` (`(P A P^T)_ij = A_(order[i], order[j])`).
-    permuted: LowerPattern,
-    /// Slot in `permuted` of each stored entry of the caller's pattern.
-    slot: Vec<usize>,
     permuted_values: Vec<f64>,
     /// Single-precision values of `P A P^T` and of its factor (see
     /// [`SparseFactor::factor_single`]); empty until the first such factorisation.
@@ -123,12 +118,24 @@ pub struct SparseFactor {
     /// The numeric factorisation's workspace, kept: allocating and freeing its few MB at every
     /// factorisation cost page faults each time.
     scratch: Option<MemBuffer>,
-    /// Supernodal factors with two subtrees of similar size: how the triangular solves share
-    /// the work between two threads.
-    split: Option<SolveSplit>,
     /// Numeric factorisations so far: tells a caller that kept this factor as an approximation
     /// whether it still holds the values it factored.
     generation: u64,
+}
+
+/// What a [`SparseFactor`]'s symbolic analysis fixes, shared by its siblings
+/// ([`SparseFactor::sibling`]).
+struct Analysis {
+    symbolic: SymbolicCholesky<usize>,
+    /// `order[k]`: the unknown eliminated k-th.
+    order: Vec<usize>,
+    /// The lower triangle of `P A P^T` (`(P A P^T)_ij = A_(order[i], order[j])`).
+    permuted: LowerPattern,
+    /// Slot in `permuted` of each stored entry of the caller's pattern.
+    slot: Vec<usize>,
+    /// Supernodal factors with two subtrees of similar size: how the triangular solves share
+    /// the work between two threads.
+    split: Option<SolveSplit>,
 }
 
 impl SparseFactor {
@@ -217,43 +224,64 @@ impl SparseFactor {
             SymbolicCholeskyRaw::Supernodal(supernodal) => SolveSplit::new(supernodal),
             SymbolicCholeskyRaw::Simplicial(_) => None,
         };
+        let analysis = Analysis {
+            symbolic,
+            order: order.to_vec(),
+            permuted,
+            slot,
+            split,
+        };
+        Self::with_analysis(kind, Arc::new(analysis))
+    }
+
+    /// A factor with its own values and workspace for `analysis`, the workspace allocated and
+    /// written now as well.
+    fn with_analysis(kind: FactorKind, analysis: Arc<Analysis>) -> Result<Self> {
         let mut factor = SparseFactor {
             kind,
-            split,
-            values: written_zeros(symbolic.len_val()),
-            symbolic,
+            values: written_zeros(analysis.symbolic.len_val()),
+            permuted_values: written_zeros(analysis.permuted.nnz()),
+            analysis,
             stored: Stored::None,
             generation: 0,
             scratch: None,
-            order: order.to_vec(),
-            permuted_values: written_zeros(permuted.nnz()),
             single_permuted: Vec::new(),
             single_values: Vec::new(),
-            permuted,
-            slot,
         };
-        // The numeric factorisations' workspace, allocated and written now as well.
         let par = factor.parallelism();
+        let symbolic = &factor.analysis.symbolic;
         let req = match kind {
-            FactorKind::Llt => factor
-                .symbolic
-                .factorize_numeric_llt_scratch::<f64>(par, Default::default()),
-            FactorKind::Ldlt => factor
-                .symbolic
-                .factorize_numeric_ldlt_scratch::<f64>(par, Default::default()),
+            FactorKind::Llt => {
+                symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default())
+            }
+            FactorKind::Ldlt => {
+                symbolic.factorize_numeric_ldlt_scratch::<f64>(par, Default::default())
+            }
         };
         scratch_of(&mut factor.scratch, req)?.fill(std::mem::MaybeUninit::new(0));
         Ok(factor)
+    }
+
+    /// A second factor of the same analysis (the same pattern, kind and elimination order),
+    /// with nothing factored: for a caller that factors one matrix while it still solves with
+    /// this factor's.
+    pub fn sibling(&self) -> Result<Self> {
+        Self::with_analysis(self.kind, Arc::clone(&self.analysis))
+    }
+
+    /// Stored entries of the pattern this factor was analysed for.
+    pub fn analysed_nnz(&self) -> usize {
+        self.analysis.slot.len()
     }
 
     /// Copies `values` (in the caller's pattern) into elimination order.
     fn permute_values(&mut self, values: &[f64]) {
         assert_eq!(
             values.len(),
-            self.slot.len(),
+            self.analysis.slot.len(),
             "values of the analysed pattern"
         );
-        for (&slot, &v) in self.slot.iter().zip(values) {
+        for (&slot, &v) in self.analysis.slot.iter().zip(values) {
             self.permuted_values[slot] = v;
         }
     }
@@ -313,7 +341,11 @@ impl SparseFactor {
             return self.factor(pattern, values);
         }
         self.generation += 1;
-        debug_assert_eq!(pattern.nnz(), self.slot.len(), "the analysed pattern");
+        debug_assert_eq!(
+            pattern.nnz(),
+            self.analysis.slot.len(),
+            "the analysed pattern"
+        );
         self.permute_values(values);
         if self.single_values.is_empty() {
             self.single_values = vec![0.0; self.values.len()];
@@ -327,9 +359,9 @@ impl SparseFactor {
         }
         let par = self.parallelism();
         let ok = numeric_llt(
-            &self.symbolic,
+            &self.analysis.symbolic,
             &mut self.scratch,
-            self.permuted.symbolic(),
+            self.analysis.permuted.symbolic(),
             &self.single_permuted,
             &mut self.single_values,
             par,
@@ -345,13 +377,17 @@ impl SparseFactor {
 
     /// Numeric `L L^T`. Returns `Ok(false)` when the matrix is not numerically positive definite.
     fn factor_llt(&mut self, pattern: &LowerPattern, values: &[f64]) -> Result<bool> {
-        debug_assert_eq!(pattern.nnz(), self.slot.len(), "the analysed pattern");
+        debug_assert_eq!(
+            pattern.nnz(),
+            self.analysis.slot.len(),
+            "the analysed pattern"
+        );
         self.permute_values(values);
         let par = self.parallelism();
         let ok = numeric_llt(
-            &self.symbolic,
+            &self.analysis.symbolic,
             &mut self.scratch,
-            self.permuted.symbolic(),
+            self.analysis.permuted.symbolic(),
             &self.permuted_values,
             &mut self.values,
             par,
@@ -366,15 +402,20 @@ impl SparseFactor {
     /// or non-finite pivot; the caller checks the resulting direction (an indefinite A still
     /// factors, so inertia is the caller's concern).
     fn factor_ldlt(&mut self, pattern: &LowerPattern, values: &[f64]) -> Result<bool> {
-        debug_assert_eq!(pattern.nnz(), self.slot.len(), "the analysed pattern");
+        debug_assert_eq!(
+            pattern.nnz(),
+            self.analysis.slot.len(),
+            "the analysed pattern"
+        );
         self.permute_values(values);
         let par = self.parallelism();
-        let mat = SparseColMatRef::new(self.permuted.symbolic(), &self.permuted_values);
+        let mat = SparseColMatRef::new(self.analysis.permuted.symbolic(), &self.permuted_values);
         let req = self
+            .analysis
             .symbolic
             .factorize_numeric_ldlt_scratch::<f64>(par, Default::default());
         let mem = scratch_of(&mut self.scratch, req)?;
-        let result = self.symbolic.factorize_numeric_ldlt::<f64>(
+        let result = self.analysis.symbolic.factorize_numeric_ldlt::<f64>(
             &mut self.values,
             mat,
             Side::Lower,
@@ -396,14 +437,18 @@ impl SparseFactor {
         if self.stored == Stored::LltSingle {
             return self.solve_single_in_place(rhs, false);
         }
-        let mut permuted: Vec<f64> = self.order.iter().map(|&i| rhs[i]).collect();
-        match (self.symbolic.raw(), &self.split, self.stored) {
+        let mut permuted: Vec<f64> = self.analysis.order.iter().map(|&i| rhs[i]).collect();
+        match (
+            self.analysis.symbolic.raw(),
+            &self.analysis.split,
+            self.stored,
+        ) {
             (SymbolicCholeskyRaw::Supernodal(supernodal), Some(split), Stored::Llt) => {
                 split.solve(supernodal, &self.values, &mut permuted)
             }
             _ => self.faer_solve_in_place(&mut permuted),
         }
-        for (&i, &v) in self.order.iter().zip(&permuted) {
+        for (&i, &v) in self.analysis.order.iter().zip(&permuted) {
             rhs[i] = v;
         }
     }
@@ -424,7 +469,7 @@ impl SparseFactor {
     /// [`SparseFactor::solve_in_place`] with the single-precision factor (the right-hand side is
     /// rounded to single precision too: its error is the factor's), refined once if `refine`.
     fn solve_single_in_place(&self, rhs: &mut [f64], refine: bool) {
-        let b: Vec<f64> = self.order.iter().map(|&i| rhs[i]).collect();
+        let b: Vec<f64> = self.analysis.order.iter().map(|&i| rhs[i]).collect();
         let mut x = self.solve_single_permuted(&b);
         if refine {
             let residual = self.permuted_residual(&b, &x);
@@ -432,7 +477,7 @@ impl SparseFactor {
                 *x += dx;
             }
         }
-        for (&i, v) in self.order.iter().zip(x) {
+        for (&i, v) in self.analysis.order.iter().zip(x) {
             rhs[i] = v;
         }
     }
@@ -440,10 +485,10 @@ impl SparseFactor {
     /// `|b - A x| / |b|` for `x` from [`SparseFactor::solve_in_place`]: how accurately the
     /// stored factorisation solves with the matrix it factored (0 for `b = 0`).
     pub fn solve_residual(&self, rhs: &[f64]) -> f64 {
-        let b: Vec<f64> = self.order.iter().map(|&i| rhs[i]).collect();
+        let b: Vec<f64> = self.analysis.order.iter().map(|&i| rhs[i]).collect();
         let mut x = rhs.to_vec();
         self.solve_in_place(&mut x);
-        let x: Vec<f64> = self.order.iter().map(|&i| x[i]).collect();
+        let x: Vec<f64> = self.analysis.order.iter().map(|&i| x[i]).collect();
         let norm = |v: &[f64]| v.iter().map(|a| a * a).sum::<f64>().sqrt();
         let scale = norm(&b);
         if scale == 0.0 {
@@ -454,24 +499,27 @@ impl SparseFactor {
 
     /// `b - A x` in elimination order, `A` the matrix of the last factorisation.
     fn permuted_residual(&self, b: &[f64], x: &[f64]) -> Vec<f64> {
-        let ax = self.permuted.symmetric_matvec(&self.permuted_values, x);
+        let ax = self
+            .analysis
+            .permuted
+            .symmetric_matvec(&self.permuted_values, x);
         b.iter().zip(ax).map(|(b, a)| b - a).collect()
     }
 
     /// `A^{-1} b` with the single-precision factor, `b` and the result in elimination order.
     fn solve_single_permuted(&self, b: &[f64]) -> Vec<f64> {
         let mut permuted: Vec<f32> = b.iter().map(|&v| v as f32).collect();
-        match (self.symbolic.raw(), &self.split) {
+        match (self.analysis.symbolic.raw(), &self.analysis.split) {
             (SymbolicCholeskyRaw::Supernodal(supernodal), Some(split)) => {
                 split.solve(supernodal, &self.single_values, &mut permuted)
             }
             _ => {
                 let par = self.parallelism();
                 let n = permuted.len();
-                let req = self.symbolic.solve_in_place_scratch::<f32>(1, par);
+                let req = self.analysis.symbolic.solve_in_place_scratch::<f32>(1, par);
                 let mut mem = MemBuffer::new(req);
                 let rhs_mat = MatMut::from_column_major_slice_mut(&mut permuted, n, 1);
-                LltRef::new(&self.symbolic, &self.single_values).solve_in_place_with_conj(
+                LltRef::new(&self.analysis.symbolic, &self.single_values).solve_in_place_with_conj(
                     Conj::No,
                     rhs_mat,
                     par,
@@ -486,22 +534,14 @@ impl SparseFactor {
     fn faer_solve_in_place(&self, permuted: &mut [f64]) {
         let par = self.parallelism();
         let n = permuted.len();
-        let req = self.symbolic.solve_in_place_scratch::<f64>(1, par);
+        let req = self.analysis.symbolic.solve_in_place_scratch::<f64>(1, par);
         let mut mem = MemBuffer::new(req);
         let rhs_mat = MatMut::from_column_major_slice_mut(permuted, n, 1);
         match self.stored {
-            Stored::Llt => LltRef::new(&self.symbolic, &self.values).solve_in_place_with_conj(
-                Conj::No,
-                rhs_mat,
-                par,
-                MemStack::new(&mut mem),
-            ),
-            Stored::Ldlt => LdltRef::new(&self.symbolic, &self.values).solve_in_place_with_conj(
-                Conj::No,
-                rhs_mat,
-                par,
-                MemStack::new(&mut mem),
-            ),
+            Stored::Llt => LltRef::new(&self.analysis.symbolic, &self.values)
+                .solve_in_place_with_conj(Conj::No, rhs_mat, par, MemStack::new(&mut mem)),
+            Stored::Ldlt => LdltRef::new(&self.analysis.symbolic, &self.values)
+                .solve_in_place_with_conj(Conj::No, rhs_mat, par, MemStack::new(&mut mem)),
             Stored::None | Stored::LltSingle => {
                 panic!("faer_solve_in_place called without a double-precision factorisation")
             }
@@ -691,7 +731,7 @@ mod tests {
         // 14^3 unknowns: a supernodal factor whose solves are split between two threads.
         let (p, v) = grid_laplacian([14, 14, 14], 0.1);
         let mut f = SparseFactor::analyse(&p, FactorKind::Llt).unwrap();
-        let split = f.split.as_ref().expect("a supernodal factor");
+        let split = f.analysis.split.as_ref().expect("a supernodal factor");
         assert!(!split.groups[1].is_empty(), "the solves are split");
         let x: Vec<f64> = (0..p.n).map(|i| (0.37 * i as f64).sin()).collect();
         let b = p.symmetric_matvec(&v, &x);
