@@ -58,7 +58,7 @@ struct TermPlan {
 }
 
 /// Energy (J), reduced gradient (free DOFs) and optionally the Hessian's lower-triangle values.
-#[derive(Default)]
+#[derive(Clone, Default)]
 pub struct Evaluation {
     pub energy: f64,
     pub gradient: Vec<f64>,

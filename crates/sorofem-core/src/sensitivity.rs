@@ -26,6 +26,7 @@
 
 use crate::energy::{HessianMode, ParamTerm, TendonCommand};
 use crate::error::{Error, Result};
+use crate::linear::SparseFactor;
 use crate::model::Model;
 use rayon::prelude::*;
 
@@ -285,6 +286,12 @@ impl Model {
     /// the factorisation there.
     pub(crate) fn active_tendons(&self) -> Vec<ActiveTendon> {
         let (z, _) = self.last_state.as_ref().expect("prepared");
+        self.active_tendons_at(z, &self.factor)
+    }
+
+    /// The displacement-controlled tendons taut at the full DOF vector `z`, with `H^{-1} J^T`
+    /// from `factor` (of the Hessian there).
+    pub(crate) fn active_tendons_at(&self, z: &[f64], factor: &SparseFactor) -> Vec<ActiveTendon> {
         let term = &self.terms.tendons;
         let free = self.assembler.full_of_free();
         (term.tendons.iter().enumerate())
@@ -294,7 +301,7 @@ impl Model {
                 tendon.add_length_gradient(z, 1.0, &mut full);
                 let row: Vec<f64> = free.iter().map(|&d| full[d]).collect();
                 let mut solved = row.clone();
-                self.factor.solve_in_place(&mut solved);
+                factor.solve_in_place(&mut solved);
                 ActiveTendon {
                     cable: term.cable_index(i),
                     row,

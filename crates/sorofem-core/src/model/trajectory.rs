@@ -32,23 +32,31 @@
 //! from the lumped mass (`density`) and from the damping coefficients.
 //!
 //! Memory: the states of every `every`-th step and the last are kept (checkpoints; by default
-//! all of them while they fit [`STATE_VALUES_BUDGET`]) and the
-//! states inside a segment are recomputed from its checkpoint in the backward sweep, so at most
-//! `steps / every + every + 1` states of `n_full + n_free` values are held (`every ~
-//! sqrt(steps)`: about `2 sqrt(steps)` states; `every = 1` keeps every state and recomputes
-//! none), besides the node positions of every step that the objective reads (`(steps + 1) 3 n`).
+//! all of them while they fit [`STATE_VALUES_BUDGET`]) and the states inside a segment are
+//! recomputed from its checkpoint in the backward sweep (`reverse`), so at most
+//! `ceil(steps / every) + 1` checkpoints, one segment's `every + 1` states and the 4 states around
+//! the two sub-steps in flight are held, of `n_full + n_free` values each (`every ~ sqrt(steps)`:
+//! about `2 sqrt(steps)` states; `every = 1` keeps every state and recomputes none), besides the
+//! node positions of every step that the objective reads (`(steps + 1) 3 n`).
+//!
+//! Time: the backward sweep factorises every sub-step's Hessian once, on one thread; beside
+//! it the other thread takes the later sub-step's solve and contractions, whose factor is already
+//! there (two factors take turns), and assembles the elastic Hessian at the sub-step's start.
 //!
 //! [`Model::trajectory_sensitivity`] (in `forward`) differentiates the same steps forwards:
 //! the change of every frame along given parameter directions (a Jacobian for least squares).
 
 mod dashpot;
 mod forward;
+mod reverse;
 mod step_end;
 mod sub_steps;
 
 pub use forward::TrajectoryDirection;
 
-use self::step_end::{add_to, CABLES, ELASTIC};
+use self::dashpot::StepDashpots;
+use self::reverse::{ReversedSubStep, ReversedSubSteps};
+use self::step_end::{add_to, singular_step, CABLES, ELASTIC};
 use self::sub_steps::SubStep;
 use super::dynamics::{
     Damping, DynamicsOptions, StepMethod, StepSetup, StepState, MAX_CONTRACTION,
@@ -59,6 +67,7 @@ use crate::assembly::Evaluation;
 use crate::cables::CableSlot;
 use crate::energy::{HessianMode, TendonCommand};
 use crate::error::{check_finite, Error, Result};
+use crate::linear::SparseFactor;
 use crate::newton::NewtonOptions;
 use crate::sensitivity::{add_contraction, dot, schur_solve, ParamLayout, ParamVector};
 
@@ -316,7 +325,10 @@ impl Model {
         rest.iter().zip(z).map(|(x, u)| x + u).collect()
     }
 
-    /// The adjoint sweep over the segments between checkpoints, last first.
+    /// The adjoint sweep over the run's sub-steps, last first. Step k's solve and contractions
+    /// run beside step k - 1's factorisation (two factors take turns): that factorisation
+    /// needs step k - 1's states only, not `lambda_k`, and, sequential, leaves the other core
+    /// free.
     #[allow(clippy::too_many_arguments)]
     fn backward(
         &mut self,
@@ -331,8 +343,7 @@ impl Model {
     ) -> Result<TrajectoryGradient> {
         let steps = actuation.len();
         let n_free = setup.free.len();
-        let n3 = 3 * self.mesh.n_nodes();
-        let no_frame = vec![0.0; n3];
+        let beta_k = setup.damping.stiffness;
         let layout = {
             let load_terms = self.terms.loads(loads);
             ParamLayout::new(&self.terms.parameterised(&load_terms))
@@ -348,93 +359,87 @@ impl Model {
             next_h: dt,
             after_next_h: dt,
             start_force_term: vec![0.0; n_free],
-            elastic_end: None,
             start_weights: None,
-            pending_elastic: None,
             load_weights: vec![0.0; self.layout.n_full()],
         };
-        for (segment, ends) in checkpoints.windows(2).enumerate().rev() {
-            let (checkpoint, next) = (&ends[0], &ends[1]);
-            let first = segment * every;
-            let last = (first + every).min(steps);
-            let mut state = checkpoint.state.clone();
-            for (tendon, &t) in self
-                .terms
-                .tendons
-                .tendons
-                .iter_mut()
-                .zip(&checkpoint.tensions)
-            {
-                tendon.tension = t;
-            }
-            // The segment's sub-step states, recomputed from its checkpoint with the forward
-            // pass's lengths; the last one's end is the next checkpoint.
-            let mut states = vec![(state.clone(), checkpoint.tensions.clone())];
-            let mut reuse = FactorReuse::new(MAX_CONTRACTION);
-            for (s, commands) in actuation.iter().enumerate().take(last).skip(first) {
-                let plan = if s + 1 == last {
-                    &plans[s][..plans[s].len() - 1]
-                } else {
-                    &plans[s][..]
-                };
-                if plan.is_empty() {
-                    continue;
+        let mut stream = ReversedSubSteps::new(checkpoints, plans, actuation, every, dt);
+        let mut factors = [self.factor.sibling()?, self.factor.sibling()?];
+        let mut factored: Option<FactoredStep> = None;
+        let mut slot = 0;
+        while let Some(step) = stream.next(self, setup)? {
+            self.set_step_commands(&actuation[step.step])?;
+            let step_end = StepEnd {
+                tensions: &step.tensions,
+                barrier_stiffness: step.sub.barrier_stiffness,
+                time: step.sub.end_time,
+            };
+            let elastic_end = factored.as_ref().map(|f| &f.start_elastic);
+            let (z0, z1) = (&step.start.z, &step.end.z);
+            let prepared =
+                self.prepare_step_end(setup, step.sub.h, (z0, z1), &step_end, elastic_end)?;
+            let nnz = self.assembler.pattern().nnz();
+            if let Some(later) = &mut factored {
+                if later.start_elastic.hessian.len() != nnz {
+                    // Self-contact grew the pattern since: its products need the grown one.
+                    later.start_elastic = self.internal_at(
+                        &later.step.start.z,
+                        ELASTIC,
+                        true,
+                        Some(HessianMode::Exact),
+                    );
                 }
-                self.converged_sub_steps(
-                    setup,
-                    &mut state,
-                    dt,
-                    s,
-                    commands,
-                    &mut reuse,
-                    Some(plan),
-                    |model, _, end, _| {
-                        states.push((end.clone(), model.tendon_tensions()));
-                        Ok(())
-                    },
-                )?;
+                self.set_step_commands(&actuation[later.step.step])?;
+                self.set_step_end_tensions(&later.step.tensions, 1.0 + beta_k / later.step.sub.h);
             }
-            states.push((next.state.clone(), next.tensions.clone()));
-            // Sub-steps before the segment (the index of the run's first is 0).
-            let before: usize = plans[..first].iter().map(Vec::len).sum();
-            // (time step, whether the sub-step is its last, the sub-step)
-            let subs: Vec<(usize, bool, SubStep)> = (first..last)
-                .flat_map(|s| {
-                    let count = plans[s].len();
-                    plans[s]
-                        .iter()
-                        .enumerate()
-                        .map(move |(i, sub)| (s, i + 1 == count, *sub))
-                })
-                .collect();
-            for (i, &(s, last_of_step, sub)) in subs.iter().enumerate().rev() {
-                let (start, _) = &states[i];
-                let (end, tensions) = &states[i + 1];
-                // Only a step's last sub-step ends on a frame the objective reads.
-                let frame = if last_of_step {
-                    &d_positions[(s + 1) * n3..(s + 2) * n3]
-                } else {
-                    &no_frame[..]
-                };
-                let step_end = StepEnd {
-                    tensions,
-                    barrier_stiffness: sub.barrier_stiffness,
-                    time: sub.end_time,
-                };
-                self.adjoint_step(
-                    setup,
-                    loads,
-                    &layout,
-                    sub.h,
-                    (before + i, s),
-                    &actuation[s],
-                    start,
-                    end,
-                    &step_end,
-                    frame,
-                    &mut sweep,
-                )?;
+            if factors[slot].analysed_nnz() != nnz {
+                factors[slot] = self.factor.sibling()?;
             }
+            // The elastic term at the step's start: the end of the step before (its Hessian
+            // then) and the start force of this one (its Hessian with stiffness damping).
+            let start_hessian = (step.index > 0 || beta_k > 0.0).then_some(HessianMode::Exact);
+            let [first, second] = &mut factors;
+            let (free, busy) = if slot == 0 {
+                (first, &*second)
+            } else {
+                (second, &*first)
+            };
+            let model = &*self;
+            let (ok, start_elastic) = rayon::join(
+                || free.factor(model.assembler.pattern(), &prepared.hessian),
+                || -> Result<Evaluation> {
+                    if let Some(later) = &factored {
+                        let frame = model.objective_frame(later, d_positions);
+                        model
+                            .adjoint_step(setup, loads, &layout, busy, later, frame, &mut sweep)?;
+                    }
+                    Ok(model.internal_at(z0, ELASTIC, true, start_hessian))
+                },
+            );
+            if !ok? {
+                return Err(singular_step(step.index));
+            }
+            factored = Some(FactoredStep {
+                step,
+                damped_force: prepared.damped_force,
+                dashpots: prepared.dashpots,
+                start_elastic: start_elastic?,
+                slot,
+            });
+            slot = 1 - slot;
+        }
+        if let Some(first) = &factored {
+            self.set_step_commands(&actuation[first.step.step])?;
+            self.set_step_end_tensions(&first.step.tensions, 1.0 + beta_k / first.step.sub.h);
+            let frame = self.objective_frame(first, d_positions);
+            self.adjoint_step(
+                setup,
+                loads,
+                &layout,
+                &factors[first.slot],
+                first,
+                frame,
+                &mut sweep,
+            )?;
         }
         // The loads' parameter derivatives do not depend on the state: one contraction with
         // the sum of every step's weights.
@@ -455,62 +460,50 @@ impl Model {
         })
     }
 
-    /// Step k of the adjoint sweep: `lambda_k` from the step's Hessian at its end, then its
+    /// `dJ/dx` of the frame a sub-step ends on (3 n values); None for a time step's sub-steps
+    /// before its last (they end between frames).
+    fn objective_frame<'a>(
+        &self,
+        factored: &FactoredStep,
+        d_positions: &'a [f64],
+    ) -> Option<&'a [f64]> {
+        let n3 = 3 * self.mesh.n_nodes();
+        let s = factored.step.step;
+        factored
+            .step
+            .last_of_step
+            .then(|| &d_positions[(s + 1) * n3..(s + 2) * n3])
+    }
+
+    /// Step k of the adjoint sweep, its Hessian factorised in `factor` and the model's commands
+    /// and tendons as [`Model::set_step_end_tensions`] leaves them for it: `lambda_k`, then its
     /// share of every derivative.
     #[allow(clippy::too_many_arguments)]
     fn adjoint_step(
-        &mut self,
+        &self,
         setup: &StepSetup,
         loads: &Loads,
         layout: &ParamLayout,
-        h: f64,
-        (k, step): (usize, usize),
-        commands: &[f64],
-        start: &StepState,
-        end: &StepState,
-        step_end: &StepEnd,
-        d_frame: &[f64],
+        factor: &SparseFactor,
+        factored: &FactoredStep,
+        d_frame: Option<&[f64]>,
         sweep: &mut Sweep,
     ) -> Result<()> {
-        self.set_step_commands(commands)?;
+        let FactoredStep {
+            step: at,
+            damped_force,
+            dashpots,
+            start_elastic,
+            ..
+        } = factored;
+        let (k, h) = (at.index, at.sub.h);
+        let (start, end) = (&at.start, &at.end);
         let n3 = 3 * self.mesh.n_nodes();
         let (alpha_m, beta_k) = (setup.damping.mass, setup.damping.stiffness);
         let scale = 1.0 + beta_k / h;
         let (z0, z1) = (&start.z, &end.z);
         let n_free = setup.free.len();
-        // Beside the factorisation: the elastic term at the step's start (also step k - 1's
-        // end, so with its Hessian then) and the elastic parameter derivatives step k + 1 left.
-        let elastic_end = sweep.elastic_end.take();
         let start_hessian = (beta_k > 0.0).then_some(HessianMode::Exact);
-        let elastic_hessian = if k > 0 {
-            Some(HessianMode::Exact)
-        } else {
-            start_hessian
-        };
-        let pending = sweep.pending_elastic.take();
-        let (flat_total, elastic_offsets) = (&mut sweep.flat, &layout.term_offsets[0]);
-        let (damped_force, dashpots, start_elastic) = self.factor_step_end(
-            setup,
-            h,
-            k,
-            (z0, z1),
-            step_end,
-            elastic_end,
-            |assembler, terms| {
-                let start = assembler.evaluate_selected(
-                    &terms.internal(),
-                    &ELASTIC,
-                    z0,
-                    true,
-                    elastic_hessian,
-                );
-                if let Some((z, w)) = pending {
-                    add_contraction(&terms.elastic, elastic_offsets, &z, &w, flat_total);
-                }
-                start
-            },
-        )?;
-
         // Step k + 1's residual depends on u_{k+1} through its inertia, M (u_{k+2} - u_{k+1}) /
         // h_{k+1}^2 - M v_{k+1} / h_{k+1} with v_{k+1} = (u_{k+1} - u_k) / h_k, and step k + 2's
         // through v_{k+2}: the steps' lengths differ where a step was split.
@@ -519,17 +512,19 @@ impl Model {
             .map(|f| {
                 let d = setup.free[f];
                 let m = setup.mass[f];
-                let objective = if d < n3 { d_frame[d] } else { 0.0 };
+                let objective = match d_frame {
+                    Some(frame) if d < n3 => frame[d],
+                    _ => 0.0,
+                };
                 objective + m * (1.0 / (hn * hn) + 1.0 / (hn * h) + alpha_m / hn) * sweep.next[f]
                     - m / (han * hn) * sweep.after_next[f]
                     + sweep.start_force_term[f]
             })
             .collect();
-        self.factor.solve_in_place(&mut lambda);
-        self.last_state = Some((z1.clone(), loads.clone()));
+        factor.solve_in_place(&mut lambda);
         // Taut displacement-controlled tendons: lambda stays on their constraints, and
         // dJ/d pull = -mu.
-        let active = self.active_tendons();
+        let active = self.active_tendons_at(z1, factor);
         let mut pull_gradients = Vec::new();
         if !active.is_empty() {
             let mu = schur_solve(
@@ -575,7 +570,6 @@ impl Model {
         } else {
             vec![0.0; n_free]
         };
-        sweep.elastic_end = (k > 0).then_some(start_elastic);
 
         let mut at_end = vec![0.0; z1.len()];
         let mut at_start = vec![0.0; z1.len()];
@@ -599,8 +593,8 @@ impl Model {
         // The registry's order: elastic, gravity, point gravity, spring cables, tendons. The
         // elastic and spring-cable forces carry the internal scale and the start force. The
         // elastic force's derivatives at z_{k+1} take step k + 1's start weights along, in one
-        // pass beside step k - 1's factorisation; the loads' (linear: the same at every state)
-        // are contracted once with the sum of every step's weights (`Model::backward`).
+        // pass; the loads' (linear: the same at every state) are contracted once with the sum
+        // of every step's weights (`Model::backward`).
         add_to(&mut sweep.load_weights, &at_end);
         let scaled: Vec<f64> = at_end.iter().map(|v| scale * v).collect();
         let mut elastic_weights = scaled.clone();
@@ -609,7 +603,6 @@ impl Model {
         }
         for (i, (term, offsets)) in terms.iter().zip(&layout.term_offsets).enumerate() {
             match i {
-                0 if k > 0 => {}
                 0 => add_contraction(*term, offsets, z1, &elastic_weights, &mut flat),
                 3 => add_contraction(*term, offsets, z1, &scaled, &mut flat),
                 _ if term.is_linear() => {}
@@ -621,7 +614,6 @@ impl Model {
             }
         }
         if k > 0 {
-            sweep.pending_elastic = Some((z1.clone(), elastic_weights));
             sweep.start_weights = (beta_k > 0.0).then_some(at_start);
         }
         // The lumped mass: d(M a)/d rho_e = V_e / 4 a on each of the tet's nodes.
@@ -654,7 +646,7 @@ impl Model {
             .1;
         for (c, g) in pull_gradients {
             flat[pull_offset + c] += g;
-            sweep.actuation[step][c] += g;
+            sweep.actuation[at.step][c] += g;
         }
         for c in 0..self.n_cables() {
             let block = match self.cable_slot(c)? {
@@ -670,7 +662,7 @@ impl Model {
                 .find(|b| b.0 == block)
                 .expect("cable block")
                 .1;
-            sweep.actuation[step][c] += flat[offset + c];
+            sweep.actuation[at.step][c] += flat[offset + c];
         }
         for (total, v) in sweep.flat.iter_mut().zip(&flat) {
             *total += v;
@@ -691,6 +683,19 @@ impl Model {
     }
 }
 
+/// A sub-step of the backward sweep whose Hessian is factorised, with what its adjoint step
+/// needs besides (see [`Model::prepare_step_end`]).
+struct FactoredStep {
+    step: ReversedSubStep,
+    damped_force: Vec<f64>,
+    dashpots: StepDashpots,
+    /// The elastic term's gradient and Hessian at the sub-step's start (exact; none at the
+    /// run's start without stiffness damping).
+    start_elastic: Evaluation,
+    /// Which of the sweep's two factors holds its Hessian.
+    slot: usize,
+}
+
 /// What the backward sweep carries from step to step.
 struct Sweep {
     flat: Vec<f64>,
@@ -707,15 +712,9 @@ struct Sweep {
     /// `beta_K / h K_F(z_{k+1}) P lambda_{k+1}` and the dashpots' `c / h dL/dz(z_{k+1})
     /// (dL/dz(z_{k+2}) . lambda_{k+1})`.
     start_force_term: Vec<f64>,
-    /// The elastic term's gradient and exact Hessian at `z_{k+1}`, assembled as step k + 1's
-    /// start, for step k's end.
-    elastic_end: Option<Evaluation>,
     /// `beta_K / h P lambda_{k+1}` (full DOFs): the weights of the elastic force's parameter
     /// derivatives at `z_{k+1}` as step k + 1's start force, contracted with step k's.
     start_weights: Option<Vec<f64>>,
-    /// A state and the weights of the elastic force's parameter derivatives there, not yet
-    /// contracted (see `Model::adjoint_step`).
-    pending_elastic: Option<(Vec<f64>, Vec<f64>)>,
     /// The sum over the steps so far of the loads' weights `-lambda_k` (full DOFs).
     load_weights: Vec<f64>,
 }

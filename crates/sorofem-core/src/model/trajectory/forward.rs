@@ -206,7 +206,7 @@ impl Model {
         // beside the factorisation.
         let start_hessian = (beta_k > 0.0).then_some(HessianMode::Exact);
         let (damped_force, dashpots, start_eval) =
-            self.factor_step_end(setup, h, k, (z0, z1), step_end, None, |assembler, terms| {
+            self.factor_step_end(setup, h, k, (z0, z1), step_end, |assembler, terms| {
                 let without_tendons = [true, true, false];
                 assembler.evaluate_selected(
                     &terms.internal(),
