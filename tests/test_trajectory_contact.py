@@ -92,7 +92,7 @@ def test_cable_dashpot_gradient_matches_central_differences(formulation):
     body = cantilever(formulation, cable=(c, k))
     objective = tip_swing(body)
     names = ["cable_damping", "cable_stiffness", "youngs_modulus", "density", "stiffness_damping", "keyframes:0"]
-    g = sf.trajectory_gradient(body, objective, names, dt=DT, steps=STEPS, gravity=G, damping=damping,
+    g = sf.trajectory_gradient(body, objective, names, dt=DT, tolerance=TIGHT, steps=STEPS, gravity=G, damping=damping,
                                actuation={0: SCHEDULE}, checkpoint_every=3)
     assert g.gradient["cable_damping"].shape == (1,)
 
@@ -131,7 +131,7 @@ def test_cable_dashpot_forward_sensitivity_matches_central_differences(formulati
     fd = check_jacobian(positions, np.array([c]), dx.reshape(-1, 1), direction=np.array([c]), step=1e-5, rtol=2e-5)
     assert fd.passed, str(fd)
     objective = tip_swing(body)
-    g = sf.trajectory_gradient(body, objective, ["cable_damping"], dt=DT, steps=STEPS, gravity=G,
+    g = sf.trajectory_gradient(body, objective, ["cable_damping"], dt=DT, tolerance=TIGHT, steps=STEPS, gravity=G,
                                damping=(1.0, 0.002), actuation={0: SCHEDULE})
     _, dJ = objective(np.asarray(out["positions"]))
     assert float(np.vdot(dJ, dx)) == pytest.approx(g.gradient["cable_damping"][0], rel=1e-8)
@@ -213,7 +213,7 @@ def test_contact_forward_sensitivity_agrees_with_the_adjoint():
     assert_contact_active(body, damping=damping)
     objective = tip_swing(body)
     with pytest.warns(BarrierStiffnessWarning):
-        g = sf.trajectory_gradient(body, objective, ["density", "stiffness_damping"], dt=DT, steps=STEPS,
+        g = sf.trajectory_gradient(body, objective, ["density", "stiffness_damping"], dt=DT, tolerance=TIGHT, steps=STEPS,
                                    gravity=G, damping=damping)
     model = body.core_model()
     rho = np.full(body.mesh.n_tets, 1.0)

@@ -70,7 +70,7 @@ def test_material_density_and_rayleigh_damping_match_central_differences(formula
     objective = tip_swing(body)
     damping = (3.0, 0.004)
     names = ["youngs_modulus", "poisson_ratio", "density", "mass_damping", "stiffness_damping"]
-    g = sf.trajectory_gradient(body, objective, names, dt=DT, steps=STEPS, gravity=G, damping=damping,
+    g = sf.trajectory_gradient(body, objective, names, dt=DT, tolerance=TIGHT, steps=STEPS, gravity=G, damping=damping,
                                checkpoint_every=3)
     assert g.positions.shape == (STEPS + 1, body.mesh.n_nodes, 3)
 
@@ -163,7 +163,8 @@ def test_the_checkpoint_interval_does_not_change_the_gradient():
     body = beam()
     objective = tip_swing(body)
     runs = [sf.trajectory_gradient(body, objective, ["youngs_modulus", "mass_damping"], dt=DT, steps=STEPS,
-                                   gravity=G, damping=(2.0, 0.0), checkpoint_every=k) for k in (1, 4, STEPS)]
+                                   gravity=G, damping=(2.0, 0.0), checkpoint_every=k, tolerance=1e-10)
+            for k in (1, 4, STEPS)]
     # A recomputed segment starts from its checkpoint with no kept factorisation, so its
     # modified-Newton iterates (not its converged states, to the tolerance 1e-10) differ from
     # the forward pass's.
@@ -180,9 +181,27 @@ def test_the_checkpoint_interval_does_not_change_the_gradient_with_a_scheduled_c
     frames = Keyframes([[0.0, 1.0], [0.04, 0.8], [0.1, 0.85]])
     names = ["keyframes:0", "youngs_modulus", "density", "mass_damping", "stiffness_damping"]
     runs = [sf.trajectory_gradient(body, objective, names, dt=DT, steps=STEPS, actuation={0: frames},
-                                   gravity=G, damping=(1.0, 0.002), checkpoint_every=k) for k in (1, 3, STEPS)]
+                                   gravity=G, damping=(1.0, 0.002), checkpoint_every=k, tolerance=1e-10)
+            for k in (1, 3, STEPS)]
     for other in runs[1:]:
         np.testing.assert_allclose(other.vector, runs[0].vector, rtol=1e-9)
+
+
+@pytest.mark.parametrize("formulation", ["standard", "mixed"])
+def test_the_default_tolerance_differentiates_the_default_simulation(formulation):
+    """By default the gradient's forward pass is sf.simulate's default run, frame for frame, and
+    its gradient agrees with a tight tolerance's to the residual that tolerance leaves."""
+    body = beam(formulation, cable=(0.9, 3e3))
+    objective = tip_swing(body)
+    names = ["youngs_modulus", "density", "mass_damping", "stiffness_damping", "cable_damping"]
+    kwargs = dict(dt=DT, steps=STEPS, gravity=G, damping=(1.0, 0.002))
+    body.set_cable_damping(0, 0.5)
+    default = sf.trajectory_gradient(body, objective, names, **kwargs)
+    simulated_run = sf.simulate(body, DT, STEPS, gravity=G, damping=(1.0, 0.002))
+    np.testing.assert_array_equal(default.positions, simulated_run.positions)
+    tight = sf.trajectory_gradient(body, objective, names, tolerance=TIGHT, **kwargs)
+    assert not np.array_equal(default.vector, tight.vector)
+    np.testing.assert_allclose(default.vector, tight.vector, rtol=1e-7)
 
 
 @pytest.mark.parametrize("formulation", ["standard", "mixed"])
@@ -193,7 +212,7 @@ def test_spring_cable_schedule_keyframes_and_stiffness(formulation):
     frames = Keyframes([[0.0, 1.0], [0.04, 0.8], [0.1, 0.85]])
     names = ["keyframes:0", "cable_stiffness", "youngs_modulus", "stiffness_damping"]
     damping = (1.0, 0.002)
-    g = sf.trajectory_gradient(body, objective, names + ["actuation"], dt=DT, steps=STEPS, actuation={0: frames},
+    g = sf.trajectory_gradient(body, objective, names + ["actuation"], dt=DT, tolerance=TIGHT, steps=STEPS, actuation={0: frames},
                                gravity=G, damping=damping)
     assert g.gradient["keyframes:0"].shape == (3,)
     assert g.gradient["actuation"].shape == (STEPS, 1)
@@ -230,7 +249,7 @@ def test_tendon_schedule_and_material(formulation, command):
     objective = tip_swing(body)
     damping = (2.0, 0.003)
     names = ["keyframes:0", "youngs_modulus", "density", "mass_damping", "stiffness_damping"]
-    g = sf.trajectory_gradient(body, objective, names, dt=DT, steps=STEPS, actuation={0: frames}, gravity=G,
+    g = sf.trajectory_gradient(body, objective, names, dt=DT, tolerance=TIGHT, steps=STEPS, actuation={0: frames}, gravity=G,
                                damping=damping)
 
     def value(t):
@@ -249,7 +268,7 @@ def test_timed_targets_are_the_sum_of_their_misfits():
     tip = body.mesh.nodes_on_plane((0.4, 0, 0), (1, 0, 0))
     goal = body.mesh.points[tip] + [0.0, 0.0, -0.01]
     tracks = [(0.05, sf.Target.nodes(tip, goal)), (0.1, sf.Target.nodes(tip, goal - [0, 0, 0.01]))]
-    g = sf.trajectory_gradient(body, tracks, ["density", "mass_damping"], dt=DT, steps=STEPS, gravity=G,
+    g = sf.trajectory_gradient(body, tracks, ["density", "mass_damping"], dt=DT, tolerance=TIGHT, steps=STEPS, gravity=G,
                                damping=(1.0, 0.0))
     x = g.positions
     expected = sum(t.bind(body.mesh).misfit(x[round(time / DT)])[0] for time, t in tracks)

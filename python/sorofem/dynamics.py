@@ -411,6 +411,9 @@ class Trajectory:
 
 #: The step methods of :func:`simulate`, accurate (converged steps) ones first.
 STEP_METHODS = ("modified", "newton", "linearly_implicit")
+#: Newton's relative residual tolerance of every step of :func:`simulate` when none is given
+#: (the trajectory gradient's too, so that it differentiates the same run).
+DEFAULT_STEP_TOLERANCE = 1e-8
 
 
 def simulate(
@@ -424,7 +427,7 @@ def simulate(
     initial: "ArrayLike | StaticResult | Trajectory | None" = None,
     initial_velocity: ArrayLike | None = None,
     save_every: int = 1,
-    tolerance: float = 1e-8,
+    tolerance: float = DEFAULT_STEP_TOLERANCE,
     max_iterations: int = 50,
     progress: bool | None = None,
     on_frames: Callable[[NDArray[np.float64], NDArray[np.float64], list[Any]], None] | None = None,

@@ -2,7 +2,7 @@
 
 The discrete adjoint of the implicit Euler steps of :func:`sorofem.simulate` (docs/theory.md,
 "Trajectory adjoint"), computed by the extension: the forward pass solves every step by
-modified Newton to a tight tolerance (the adjoint is exact at converged states only), keeps
+modified Newton to the tolerance (by default :func:`sorofem.simulate`'s: the same run), keeps
 every state (or, for runs too long for that, every ``checkpoint_every``-th state, recomputing
 the others segment by segment in the backward sweep), one factorisation of the step's Hessian
 per step. Cable dashpots and frictionless contact (obstacles, self-contact) are differentiated;
@@ -24,7 +24,7 @@ from .._extension import core
 from .._validate import MAX_TIME_STEPS, as_finite, describe, non_negative, positive_int, positive_scalar
 from ..body import Body, set_cable_values
 from ..cables import cable_index
-from ..dynamics import Keyframes, Trajectory, evaluate_schedule
+from ..dynamics import DEFAULT_STEP_TOLERANCE, Keyframes, Trajectory, evaluate_schedule
 from ..errors import InputError, ParameterError
 from ..static import StaticResult, check_magnitudes
 from ..targets import BoundTarget, Target
@@ -64,10 +64,12 @@ def warn_balanced_contact(steps: int, total: int) -> None:
         )
 
 
-#: Newton's relative tolerance of every step when none is given: the adjoint differentiates
-#: the converged step equations, so the states must satisfy them to well below the accuracy
-#: wanted of the gradient.
-DEFAULT_TOLERANCE = 1e-10
+#: Newton's relative tolerance of every step when none is given: :func:`sorofem.simulate`'s, so
+#: that the gradient is taken along the very trajectory the simulation returns. The adjoint
+#: differentiates the converged step equations, so the residual left in the states perturbs the
+#: gradient: by 2e-10 relative at this tolerance on the hammerbot's swing (BENCHMARKS.md,
+#: "Trajectory gradient"); a tighter one makes it smaller.
+DEFAULT_TOLERANCE = DEFAULT_STEP_TOLERANCE
 
 
 @dataclass
@@ -257,9 +259,12 @@ def trajectory_gradient(
     dt, steps, actuation, gravity, damping, initial, initial_velocity, max_iterations
         As for :func:`sorofem.simulate`.
     tolerance
-        Newton's relative tolerance of every step (tight by default: the adjoint is exact at
-        converged states). Every step is solved by modified Newton (the factorisation kept
-        across steps, as ``method="modified"``).
+        Newton's relative tolerance of every step, by default :func:`sorofem.simulate`'s (1e-8):
+        the forward pass is then the default simulation's, frame for frame. The adjoint is exact
+        at converged states; the residual the tolerance leaves perturbs the gradient (by 2e-10
+        relative on the hammerbot's swing at 1e-8), so a central-difference check wants a
+        tighter one, such as 1e-11. Every step is solved by modified Newton (the factorisation
+        kept across steps, as ``method="modified"``).
     checkpoint_every
         Keep every this many states: memory ``steps / k + k + 1`` states besides the positions
         the objective reads; the backward sweep recomputes the states between two kept ones
