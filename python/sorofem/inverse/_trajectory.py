@@ -67,7 +67,7 @@ def warn_balanced_contact(steps: int, total: int) -> None:
 #: Newton's relative tolerance of every step when none is given: :func:`sorofem.simulate`'s, so
 #: that the gradient is taken along the very trajectory the simulation returns. The adjoint
 #: differentiates the converged step equations, so the residual left in the states perturbs the
-#: gradient: by 2e-10 relative at this tolerance on the hammerbot's swing (BENCHMARKS.md,
+#: gradient: by 3e-10 relative at this tolerance on the hammerbot's swing (BENCHMARKS.md,
 #: "Trajectory gradient"); a tighter one makes it smaller.
 DEFAULT_TOLERANCE = DEFAULT_STEP_TOLERANCE
 
@@ -261,7 +261,7 @@ def trajectory_gradient(
     tolerance
         Newton's relative tolerance of every step, by default :func:`sorofem.simulate`'s (1e-8):
         the forward pass is then the default simulation's, frame for frame. The adjoint is exact
-        at converged states; the residual the tolerance leaves perturbs the gradient (by 2e-10
+        at converged states; the residual the tolerance leaves perturbs the gradient (by 3e-10
         relative on the hammerbot's swing at 1e-8), so a central-difference check wants a
         tighter one, such as 1e-11. Every step is solved by modified Newton (the factorisation
         kept across steps, as ``method="modified"``).
