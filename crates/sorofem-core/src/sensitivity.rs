@@ -284,14 +284,18 @@ pub(crate) fn add_derivative_along(
 impl Model {
     /// The displacement-controlled tendons taut at the last solution, with `H^{-1} J^T` from
     /// the factorisation there.
-    pub(crate) fn active_tendons(&self) -> Vec<ActiveTendon> {
+    pub(crate) fn active_tendons(&self) -> Result<Vec<ActiveTendon>> {
         let (z, _) = self.last_state.as_ref().expect("prepared");
         self.active_tendons_at(z, &self.factor)
     }
 
     /// The displacement-controlled tendons taut at the full DOF vector `z`, with `H^{-1} J^T`
-    /// from `factor` (of the Hessian there).
-    pub(crate) fn active_tendons_at(&self, z: &[f64], factor: &SparseFactor) -> Vec<ActiveTendon> {
+    /// from `factor` (of the Hessian there, solved to double precision).
+    pub(crate) fn active_tendons_at(
+        &self,
+        z: &[f64],
+        factor: &SparseFactor,
+    ) -> Result<Vec<ActiveTendon>> {
         let term = &self.terms.tendons;
         let free = self.assembler.full_of_free();
         (term.tendons.iter().enumerate())
@@ -301,12 +305,12 @@ impl Model {
                 tendon.add_length_gradient(z, 1.0, &mut full);
                 let row: Vec<f64> = free.iter().map(|&d| full[d]).collect();
                 let mut solved = row.clone();
-                factor.solve_in_place(&mut solved);
-                ActiveTendon {
+                factor.solve_to_precision(&mut solved)?;
+                Ok(ActiveTendon {
                     cable: term.cable_index(i),
                     row,
                     solved,
-                }
+                })
             })
             .collect()
     }
@@ -407,7 +411,7 @@ impl Model {
             })
             .collect();
         self.factor.solve_in_place(&mut rhs);
-        let active = self.active_tendons();
+        let active = self.active_tendons()?;
         let mut multipliers = Vec::new();
         if !active.is_empty() {
             multipliers = schur_solve(&active, active.iter().map(|a| dot(&a.row, &rhs)).collect())?;
@@ -468,7 +472,7 @@ impl Model {
                 Err(_) => None,
             })
             .collect();
-        let active = self.active_tendons();
+        let active = self.active_tendons()?;
         if !active.is_empty() {
             let schur_rhs = (active.iter())
                 .map(|a| dot(&a.row, &rhs) + pulls[a.cable])

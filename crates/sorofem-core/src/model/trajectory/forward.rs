@@ -217,7 +217,7 @@ impl Model {
                 )
             })?;
         self.last_state = Some((z1.clone(), loads.clone()));
-        let active = self.active_tendons();
+        let active = self.active_tendons()?;
         let load_terms = self.terms.loads(loads);
         let terms = self.terms.parameterised(&load_terms);
         let density_offset = layout
