@@ -18,15 +18,19 @@ TABLES["trajectory"] = Table(
     "Rayleigh damping (1.0 1/s, 1e-3 s), 100 steps of 10 ms. Objective J = sum over the frames of the "
     "tip nodes' mean y-displacement squared; gradient by `sf.trajectory_gradient` with respect to "
     "Young's modulus, Poisson's ratio, density and both Rayleigh coefficients: its own forward pass "
-    "(every step modified Newton to 1e-10, unsplit), then the backward sweep factorising each step's "
-    "Hessian once. By default every state is kept while the run's states fit 512 MiB (here: none "
-    "recomputed); with `checkpoint_every=10` only every 10th state is kept and the backward sweep "
-    "recomputes the others segment by segment. Forward = `sf.simulate` with the defaults (`modified`, "
-    "tolerance 1e-8) and with full Newton to the gradient's tolerance (`newton`, 1e-10). The default forward "
-    "run and the gradient: medians of 3 rounds that alternate them in one process; the others: one run each. "
+    "(every step modified Newton to `sf.simulate`'s default tolerance 1e-8, unsplit: the default "
+    "forward run's frames, bit for bit), then the backward sweep factorising each step's Hessian once, "
+    "the solve and contractions of the step after it beside each factorisation. By default every state "
+    "is kept while the run's states fit 512 MiB (here: none recomputed); with `checkpoint_every=10` only "
+    "every 10th state is kept and the backward sweep recomputes the others segment by segment. The "
+    "gradient at tolerance 1e-10 shows what the default's residual costs: its time and the largest "
+    "relative difference of its entries from the default's. Forward = `sf.simulate` with the defaults "
+    "(`modified`, tolerance 1e-8) and with full Newton to 1e-10 (`newton`). The default forward run and "
+    "the gradient: medians of 3 rounds that alternate them in one process; the others: one run each. "
     "Memory for 1000 steps: the states the default keeps (all 1001) and those `checkpoint_every = 32` "
-    "keeps (32 checkpoints + the last state + one 32-step segment), each the full DOFs plus the free "
-    "DOFs' velocities, besides the 1001 frames of node positions the objective reads.",
+    "keeps (32 checkpoints + the last state, one segment's 33 states and the 4 states around the two "
+    "steps in flight), each the full DOFs plus the free DOFs' velocities, besides the 1001 frames of "
+    "node positions the objective reads.",
     (
         col("case", "case", str),
         col("tets", "tets"),
@@ -35,7 +39,11 @@ TABLES["trajectory"] = Table(
         col("forward, default [s]", "seconds_forward"),
         col("forward, newton 1e-10 [s]", "seconds_forward_tight"),
         col("gradient [s]", "seconds"),
+        Column("frames = forward default's", lambda r: {True: "yes", False: "no"}.get(r.get("default_positions_equal_forward"), "-")),
         col("gradient, checkpoints every 10 [s]", "seconds_checkpointed"),
+        col("gradient, tolerance 1e-10 [s]", "seconds_tight"),
+        Column("tolerance 1e-10: max rel. difference",
+               lambda r: fmt(r.get("tight_max_relative_difference"), digits=1)),
         Column("gradient / forward default", lambda r: fmt(ratio(r.get("seconds"), r.get("seconds_forward")))),
         Column("checkpointed / forward default",
                lambda r: fmt(ratio(r.get("seconds_checkpointed"), r.get("seconds_forward")))),
@@ -88,18 +96,25 @@ def sorofem_hammerbot_trajectory_gradient() -> Row:
     t1 = time.perf_counter()
     checkpointed = sf.trajectory_gradient(body(), objective, names, dt=DT, steps=STEPS, checkpoint_every=10, **kwargs)
     t2 = time.perf_counter()
+    tight = sf.trajectory_gradient(body(), objective, names, dt=DT, steps=STEPS, tolerance=1e-10, **kwargs)
+    t3 = time.perf_counter()
     n_full = 3 * mesh.n_nodes
     state_bytes = (n_full + n_full - 3 * fixed.size) * 8
-    kept = (32 + 1 + 32) * state_bytes
+    kept = (32 + 1 + 33 + 4) * state_bytes
+
+    def max_relative_difference(other) -> float:
+        return max(float(np.max(np.abs(np.ravel(other.gradient[k]) - np.ravel(v)) / np.max(np.abs(np.ravel(v)))))
+                   for k, v in g.gradient.items())
+
     return {
         "tets": mesh.n_tets, "steps": STEPS, "converged": bool(np.isfinite(forward.positions).all()),
         "seconds_forward": statistics.median(forward_times), "seconds": statistics.median(gradient_times),
         "forward_times": forward_times, "gradient_times": gradient_times,
-        "seconds_forward_tight": t1 - t0, "seconds_checkpointed": t2 - t1,
+        "seconds_forward_tight": t1 - t0, "seconds_checkpointed": t2 - t1, "seconds_tight": t3 - t2,
         "states_mib_1000": round(1001 * state_bytes / 2**20, 1), "checkpoint_mib_1000": round(kept / 2**20, 1), "positions_mib_1000": round(1001 * n_full * 8 / 2**20, 1),
         "gradient": {k: float(np.ravel(v)[0]) for k, v in g.gradient.items()},
-        "checkpointed_max_relative_difference": max(
-            float(np.max(np.abs(np.ravel(checkpointed.gradient[k]) - np.ravel(v)) / np.max(np.abs(np.ravel(v)))))
-            for k, v in g.gradient.items()),
+        "checkpointed_max_relative_difference": max_relative_difference(checkpointed),
+        "tight_max_relative_difference": max_relative_difference(tight),
+        "default_positions_equal_forward": bool(np.array_equal(g.positions, forward.positions)),
         "mean_iterations_per_step": float(np.mean(g.iterations)),
     }
