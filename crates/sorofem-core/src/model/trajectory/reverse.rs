@@ -25,8 +25,8 @@ pub(super) struct ReversedSubStep {
 }
 
 /// An iterator (by [`ReversedSubSteps::next`], which needs the model) over the run's sub-steps,
-/// last first. It holds one segment's states at a time: with the checkpoints, at most
-/// `steps / every + every + 1` states besides the two of the sub-step the caller holds.
+/// last first. It holds one segment's `every + 1` states at a time (its two ends copies of
+/// checkpoints); each sub-step it returns carries copies of its own two.
 pub(super) struct ReversedSubSteps<'a> {
     checkpoints: &'a [Checkpoint],
     plans: &'a [Vec<SubStep>],
