@@ -391,8 +391,7 @@ impl Model {
                         Some(HessianMode::Exact),
                     );
                 }
-                self.set_step_commands(&actuation[later.step.step])?;
-                self.set_step_end_tensions(&later.step.tensions, 1.0 + beta_k / later.step.sub.h);
+                self.enter_adjoint_step(actuation, beta_k, later)?;
             }
             if factors[slot].analysed_nnz() != nnz {
                 factors[slot] = self.factor.sibling()?;
@@ -435,8 +434,7 @@ impl Model {
             slot = 1 - slot;
         }
         if let Some(first) = &factored {
-            self.set_step_commands(&actuation[first.step.step])?;
-            self.set_step_end_tensions(&first.step.tensions, 1.0 + beta_k / first.step.sub.h);
+            self.enter_adjoint_step(actuation, beta_k, first)?;
             let frame = self.objective_frame(first, d_positions);
             self.adjoint_step(
                 setup,
@@ -465,6 +463,20 @@ impl Model {
             stiffness_damping: sweep.stiffness_damping,
             cable_damping: sweep.cable_damping,
         })
+    }
+
+    /// Sets the commands and the tendons of `factored`'s sub-step as its adjoint step reads
+    /// them (the factorisation of the sub-step before may have left another's).
+    fn enter_adjoint_step(
+        &mut self,
+        actuation: &[Vec<f64>],
+        beta_k: f64,
+        factored: &FactoredStep,
+    ) -> Result<()> {
+        let at = &factored.step;
+        self.set_step_commands(&actuation[at.step])?;
+        self.set_step_end_tensions(&at.tensions, 1.0 + beta_k / at.sub.h);
+        Ok(())
     }
 
     /// `dJ/dx` of the frame a sub-step ends on (3 n values); None for a time step's sub-steps
