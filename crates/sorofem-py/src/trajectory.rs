@@ -223,7 +223,8 @@ impl Run {
     }
 }
 
-/// {"positions" (frames, n, 3), "iterations", "balanced_contact_steps", "split_steps"} of a
+/// {"positions" (frames, n, 3), "iterations", "balanced_contact_steps",
+/// "balanced_stiffness_steps", "split_steps"} of a
 /// recorded trajectory.
 fn record_dict<'py>(
     py: Python<'py>,
@@ -239,6 +240,7 @@ fn record_dict<'py>(
     )?;
     out.set_item("iterations", record.iterations)?;
     out.set_item("balanced_contact_steps", record.balanced_contact_steps)?;
+    out.set_item("balanced_stiffness_steps", record.balanced_stiffness_steps)?;
     out.set_item("split_steps", record.split_steps)?;
     Ok(out)
 }

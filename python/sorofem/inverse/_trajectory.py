@@ -42,10 +42,12 @@ __all__ = ["trajectory_gradient", "TrajectoryGradientResult", "TRAJECTORY_PARAME
 TRAJECTORY_PARAMETERS = ("mass_damping", "stiffness_damping", "cable_damping", "actuation", "keyframes:<cable>")
 
 class BarrierStiffnessWarning(UserWarning):
-    """Trajectory derivatives through contact hold IPC's barrier stiffness at the value each
-    step converged with; in steps that ended in contact with a stiffness balanced inside its
-    bounds, its change with the parameters is missing, and the derivatives are approximate
-    (an error of the order of the gap's change, a fraction of ``dhat``, against the motion).
+    """Trajectory derivatives through contact follow IPC's adaptive barrier stiffness (balanced
+    at every step's start, doubled within it) except on a body with tendons: their tensions
+    enter the balance and are not differentiated, so there the stiffness is held at the value
+    each step converged with, and in steps that ended in contact with a stiffness balanced
+    inside its bounds its change with the parameters is missing (an error of the order of the
+    gap's change, a fraction of ``dhat``, against the motion).
     ``body.set_contact(adaptive_stiffness=False)`` holds the stiffness fixed in the simulation
     too, and the derivatives are then exact."""
 
@@ -55,8 +57,9 @@ def warn_balanced_contact(steps: int, total: int) -> None:
     contact with a balanced barrier stiffness."""
     if steps > 0:
         warnings.warn(
-            f"{steps} of {total} time steps ended in contact with a barrier stiffness balanced inside its bounds: "
-            "the trajectory derivatives hold it fixed there, so they are approximate; "
+            f"{steps} of {total} time steps ended in contact with a barrier stiffness balanced inside its bounds "
+            "on a body with tendons, whose tensions in the balance are not differentiated: the trajectory "
+            "derivatives hold the stiffness fixed there, so they are approximate; "
             "body.set_contact(adaptive_stiffness=False) fixes it in the simulation too and makes them exact "
             "(a stiffer barrier, body.set_contact(stiffness=...), or a smaller dhat makes the missing part smaller)",
             BarrierStiffnessWarning,
@@ -91,8 +94,12 @@ class TrajectoryGradientResult:
     iterations
         Newton iterations of every step.
     balanced_contact_steps
-        Steps that ended in contact with a barrier stiffness balanced inside its bounds, where
-        the gradient is approximate (see :class:`BarrierStiffnessWarning`); 0 without contact.
+        Steps that ended in contact with a barrier stiffness balanced inside its bounds that
+        the gradient holds fixed, so that it is approximate there (a body with tendons, see
+        :class:`BarrierStiffnessWarning`); 0 otherwise.
+    balanced_stiffness_steps
+        Steps whose barrier stiffness IPC balanced inside its bounds at their start (in
+        contact there): the gradient follows its change with the parameters and the states.
     split_steps
         Steps the run halved as :func:`sorofem.simulate` does (where Newton failed or a moving
         obstacle would have run into the body), differentiated through their halves: the
@@ -106,6 +113,7 @@ class TrajectoryGradientResult:
     iterations: NDArray[np.int64]
     balanced_contact_steps: int = 0
     split_steps: int = 0
+    balanced_stiffness_steps: int = 0
 
     @property
     def vector(self) -> NDArray[np.float64]:
@@ -374,4 +382,4 @@ def trajectory_gradient(
     balanced = int(out["balanced_contact_steps"])
     warn_balanced_contact(balanced, steps)
     return TrajectoryGradientResult(values[-1], gradient, np.asarray(out["positions"]), np.asarray(out["iterations"]),
-                                    balanced, int(out["split_steps"]))
+                                    balanced, int(out["split_steps"]), int(out["balanced_stiffness_steps"]))

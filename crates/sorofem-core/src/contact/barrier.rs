@@ -86,16 +86,23 @@ pub fn initial_barrier_stiffness(
     grad_barrier: &[f64],
     bounds: StiffnessBounds,
 ) -> f64 {
+    balanced_barrier_stiffness(grad_energy, grad_barrier)
+        .map_or(bounds.min, |kappa| kappa.clamp(bounds.min, bounds.max))
+}
+
+/// The unclamped balance of [`initial_barrier_stiffness`], `-(grad_barrier . grad_energy) /
+/// |grad_barrier|^2` (J/m^4); `None` without a barrier gradient.
+pub fn balanced_barrier_stiffness(grad_energy: &[f64], grad_barrier: &[f64]) -> Option<f64> {
     let norm2: f64 = grad_barrier.iter().map(|g| g * g).sum();
     if norm2 == 0.0 {
-        return bounds.min;
+        return None;
     }
     let dot: f64 = grad_barrier
         .iter()
         .zip(grad_energy)
         .map(|(b, e)| b * e)
         .sum();
-    (-dot / norm2).clamp(bounds.min, bounds.max)
+    Some(-dot / norm2)
 }
 
 /// IPC's stiffness update, once per Newton iteration: when the minimum squared distance is

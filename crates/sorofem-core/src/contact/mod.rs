@@ -35,4 +35,4 @@ pub use distance::{Feature, Vec3};
 pub use obstacle::{Obstacle, ObstacleMesh, Plane, Sphere};
 pub use potential::BarrierPotential;
 pub use psd::{project_to_psd, project_translation_invariant_to_psd, symmetric_eigen};
-pub use term::{ContactForces, ContactSetup, ContactTerm, ObstacleSpec};
+pub use term::{free_values, ContactForces, ContactSetup, ContactTerm, ObstacleSpec, UnitBarrier};

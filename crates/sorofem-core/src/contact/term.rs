@@ -33,6 +33,8 @@ use rayon::prelude::*;
 
 mod stiffness;
 
+pub use stiffness::{free_values, UnitBarrier};
+
 /// The default activation distance `dhat` as a fraction of the mean boundary edge length.
 pub const DHAT_PER_EDGE: f64 = 1e-2;
 /// The default friction slip `eps_u` of static solves (m) as a fraction of `dhat`: the tangential
@@ -141,6 +143,8 @@ pub struct ContactTerm {
     /// The barrier stiffness of the current solve (J/m^4), and the one solves start from.
     stiffness: f64,
     reference_stiffness: Option<f64>,
+    /// See [`ContactTerm::balanced_stiffness`].
+    balanced_stiffness: Option<f64>,
     /// See [`ContactSetup::adaptive_stiffness`].
     adaptive_stiffness: bool,
     friction_slip: f64,
@@ -230,6 +234,7 @@ impl ContactTerm {
             dhat,
             stiffness: reference_stiffness.unwrap_or(1.0),
             reference_stiffness,
+            balanced_stiffness: None,
             adaptive_stiffness: setup.adaptive_stiffness,
             friction_slip,
             friction_velocity,

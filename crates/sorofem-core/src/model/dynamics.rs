@@ -225,8 +225,8 @@ impl Model {
     ///
     /// Obstacles move along their paths; each step first moves them to where they are at its end
     /// (split, like a failed step, when that would make them touch the body), lags friction at
-    /// the step's start (`eps_u = eps_v h`), starts Newton from its start cut short of any
-    /// contact, and balances the barrier stiffness there (IPC's initial stiffness). Every step
+    /// the step's start (`eps_u = eps_v h`), balances the barrier stiffness there (IPC's
+    /// initial stiffness) and starts Newton from its start cut short of any contact. Every step
     /// method bounds its line search by continuous collision detection; modified Newton
     /// refactorises when the active contacts change.
     #[allow(clippy::too_many_arguments)]
@@ -561,7 +561,7 @@ impl Model {
             problem.keep_factorizations(reuse.clone());
         }
         if problem.model.terms.contact.is_some() {
-            problem.contact = Some(ContactSolve::new(FrictionLag::Fixed, true));
+            problem.contact = Some(ContactSolve::new(FrictionLag::Fixed, Some(state.z.clone())));
         }
         // The step scales the internal energy, dashpots included, by 1 + beta_K / h; a dashpot
         // over h + beta_K keeps their force at c dL/dt.

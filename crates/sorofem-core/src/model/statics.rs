@@ -76,7 +76,7 @@ impl Model {
         let start_tensions = z[problem.constraints.offset..].to_vec();
         if problem.model.terms.contact.is_some() {
             let lag = FrictionLag::LoadStep { origin: None };
-            problem.contact = Some(ContactSolve::new(lag, false));
+            problem.contact = Some(ContactSolve::new(lag, None));
         }
         // Only the prescribed displacements are scaled by the load factor: the initial guess is
         // kept as given for the free DOFs, which is what warm starts need.

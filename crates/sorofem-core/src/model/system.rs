@@ -69,10 +69,13 @@ pub(super) enum FrictionLag {
 /// The contact side of one solve.
 pub(super) struct ContactSolve {
     pub(super) friction: FrictionLag,
-    /// Dynamics: IPC's initial stiffness at each start (balancing the other forces); statics
-    /// keep the reference stiffness, so that a solve's result is a smooth function of the
-    /// parameters (sensitivities, inverse problems).
-    pub(super) balance_stiffness: bool,
+    /// Dynamics: the time step's start state (full DOFs), where IPC's initial stiffness
+    /// balances the other forces of the step; statics keep the reference stiffness (`None`), so
+    /// that a solve's result is a smooth function of the parameters (sensitivities, inverse
+    /// problems). The step's start, not Newton's (extrapolated, then cut short of contact): the
+    /// stiffness is then a smooth function of the step's start and of the parameters, which the
+    /// trajectory derivatives differentiate.
+    pub(super) balance_at: Option<Vec<f64>>,
     /// The stencils' Hessians are always projected, even in the exact Newton direction.
     pub(super) project: bool,
     /// The full DOF vector the last load step started from.
@@ -98,10 +101,10 @@ impl ContactSolve {
         self.accepted_min_d2.is_finite()
     }
 
-    pub(super) fn new(friction: FrictionLag, balance_stiffness: bool) -> Self {
+    pub(super) fn new(friction: FrictionLag, balance_at: Option<Vec<f64>>) -> Self {
         ContactSolve {
             friction,
-            balance_stiffness,
+            balance_at,
             project: false,
             load_step_start: Vec::new(),
             last_min_d2: f64::INFINITY,
@@ -737,16 +740,16 @@ impl System<'_> {
     /// The start of a load step (statics) or time step (dynamics): the friction lagged there
     /// (statics), the barrier stiffness balanced there (dynamics).
     fn start_contact(&mut self, z: &[f64]) {
-        let balance = self.contact.as_ref().is_some_and(|c| c.balance_stiffness);
-        let energy_gradient = balance.then(|| self.gradient_without_contact(z));
+        let balance = self.contact.as_ref().and_then(|c| c.balance_at.as_deref());
+        let energy_gradient = balance.map(|at| (at.to_vec(), self.gradient_without_contact(at)));
         let (Some(term), Some(solve)) = (&mut self.model.terms.contact, &mut self.contact) else {
             return;
         };
         let t0 = Instant::now();
         solve.load_step_start = z.to_vec();
         solve.accepted_min_d2 = f64::INFINITY;
-        if let Some(g) = energy_gradient {
-            term.balance_stiffness(&self.model.assembler, z, &g);
+        if let Some((at, g)) = energy_gradient {
+            term.balance_stiffness(&self.model.assembler, &at, &g);
         }
         if let FrictionLag::LoadStep { origin } = &solve.friction {
             let slip = term.friction_slip();

@@ -13,8 +13,9 @@
 //!
 //! with `s = 1 + beta_K / h`, F the elastic and spring-cable force (N), T the tendons' force,
 //! D_k the cables' dashpots (`dashpot`: they depend on the step's start too), B the contact
-//! barrier (frictionless; at the step's end only, its stiffness `kappa_k` held at the value the
-//! step converged with), f the loads and P the projection on the displacement rows. For
+//! barrier (frictionless; at the step's end, its adaptive stiffness `kappa_k` balanced at the
+//! step's start: a function of `z_k`, `u_{k-1}` and the parameters, see `balance`), f the
+//! loads and P the projection on the displacement rows. For
 //! `J = sum_k phi_k(x_k)` the adjoint states `lambda_k` (one per step, free DOFs) solve, from
 //! the last step back,
 //!
@@ -48,6 +49,7 @@
 //! [`Model::trajectory_sensitivity`] (in `forward`) differentiates the same steps forwards:
 //! the change of every frame along given parameter directions (a Jacobian for least squares).
 
+mod balance;
 mod dashpot;
 mod forward;
 mod reverse;
@@ -56,6 +58,7 @@ mod sub_steps;
 
 pub use forward::TrajectoryDirection;
 
+use self::balance::{BalanceAdjoint, StiffnessBalance};
 use self::dashpot::StepDashpots;
 use self::reverse::{ReversedSubStep, ReversedSubSteps};
 use self::step_end::{add_to, singular_step, CABLES, ELASTIC};
@@ -111,9 +114,12 @@ pub struct RecordedPositions {
     pub positions: Vec<Vec<f64>>,
     pub iterations: Vec<usize>,
     /// Steps that ended in contact with a barrier stiffness IPC balanced strictly inside its
-    /// bounds: the derivatives hold it at that value, so they miss its change with the
-    /// parameters there (at a bound, or without contact at the step's end, nothing is missed).
+    /// bounds that the derivatives hold at its value, so that they miss its change with the
+    /// parameters there: those of a body with tendons (see `balance`); 0 otherwise.
     pub balanced_contact_steps: usize,
+    /// Steps with a barrier stiffness IPC balanced strictly inside its bounds at their start
+    /// (some stencil within `dhat` there), whose change the derivatives follow (`balance`).
+    pub balanced_stiffness_steps: usize,
     /// Steps the run halved (see `sub_steps`): the derivatives are those of the simulation where
     /// a small change of the parameters keeps the halvings.
     pub split_steps: usize,
@@ -132,6 +138,7 @@ struct Checkpoint {
 struct StepEnd<'a> {
     tensions: &'a [f64],
     barrier_stiffness: f64,
+    balanced_stiffness: Option<f64>,
     time: f64,
 }
 
@@ -143,12 +150,12 @@ impl Model {
     /// (`(steps + 1) 3 n` values, J's unit per m), or `None` to stop (its error is the caller's).
     /// `checkpoint_every` (0: [`default_checkpoint_interval`]) sets the memory (see the module docs).
     ///
-    /// Contact (obstacles, self-contact) is differentiated without friction: the barrier
-    /// depends on the step's end only, its stiffness taken as fixed at the value each step
-    /// converged with (IPC's stiffness is balanced at every step's start and may double within
-    /// it; its change with the parameters is not differentiated, and is none with a fixed
-    /// stiffness, [`crate::contact::ContactSetup::adaptive_stiffness`]). Spring cables' dashpots are
-    /// differentiated, their coefficients among the parameters.
+    /// Contact (obstacles, self-contact) is differentiated without friction: the barrier at the
+    /// step's end, with IPC's adaptive stiffness balanced at the step's start followed through
+    /// its dependence on that start and on the parameters (its doublings within the step held;
+    /// `balance`). With tendons the balanced stiffness is held at each step's converged value
+    /// and such steps are counted ([`RecordedPositions::balanced_contact_steps`]). Spring
+    /// cables' dashpots are differentiated, their coefficients among the parameters.
     ///
     /// A step is halved as [`Model::simulate_with`] halves it (where Newton fails or a moving
     /// obstacle would run into the body over it: `sub_steps`), and the derivatives follow its
@@ -183,6 +190,7 @@ impl Model {
             positions: vec![self.node_positions(&state.z)],
             iterations: Vec::with_capacity(steps),
             balanced_contact_steps: 0,
+            balanced_stiffness_steps: 0,
             split_steps: 0,
         };
         let mut checkpoints = Vec::new();
@@ -287,21 +295,6 @@ impl Model {
         self.terms.contact.as_ref().map_or(0.0, |c| c.stiffness())
     }
 
-    /// Whether the barrier stiffness lies strictly inside its bounds with some stencil within
-    /// `dhat` at the full DOF vector `z` (see [`RecordedPositions::balanced_contact_steps`]).
-    fn balanced_in_contact(&self, z: &[f64]) -> bool {
-        let Some(contact) = &self.terms.contact else {
-            return false;
-        };
-        let bounds = contact.stiffness_bounds();
-        let kappa = contact.stiffness();
-        if !(kappa > bounds.min && kappa < bounds.max) {
-            return false;
-        }
-        let forces = contact.forces(z);
-        forces.self_active + forces.active.iter().sum::<usize>() > 0
-    }
-
     /// Each spring cable's index among all the model's cables.
     fn spring_cable_indices(&self) -> Vec<usize> {
         let mut out = vec![0; self.terms.cables.cables.len()];
@@ -364,6 +357,9 @@ impl Model {
             start_force_term: vec![0.0; n_free],
             start_weights: None,
             load_weights: vec![0.0; self.layout.n_full()],
+            balance_row: vec![0.0; n_free],
+            balance_next: vec![0.0; n_free],
+            balance_after_next: vec![0.0; n_free],
         };
         let mut stream = ReversedSubSteps::new(checkpoints, plans, actuation, every, dt);
         let mut factors = [self.factor.sibling()?, self.factor.sibling()?];
@@ -374,12 +370,14 @@ impl Model {
             let step_end = StepEnd {
                 tensions: &step.tensions,
                 barrier_stiffness: step.sub.barrier_stiffness,
+                balanced_stiffness: step.sub.balanced_stiffness,
                 time: step.sub.end_time,
             };
             let elastic_end = factored.as_ref().map(|f| &f.start_elastic);
             let (z0, z1) = (&step.start.z, &step.end.z);
             let prepared =
                 self.prepare_step_end(setup, step.sub.h, (z0, z1), &step_end, elastic_end)?;
+            let balance = self.stiffness_balance(&step_end, (z0, z1));
             let nnz = self.assembler.pattern().nnz();
             if let Some(later) = &mut factored {
                 if later.start_elastic.hessian.len() != nnz {
@@ -430,6 +428,7 @@ impl Model {
                 dashpots: prepared.dashpots,
                 start_elastic: start_elastic?,
                 slot,
+                balance,
             });
             slot = 1 - slot;
         }
@@ -513,6 +512,7 @@ impl Model {
             damped_force,
             dashpots,
             start_elastic,
+            balance,
             ..
         } = factored;
         let (k, h) = (at.index, at.sub.h);
@@ -538,6 +538,9 @@ impl Model {
                 objective + m * (1.0 / (hn * hn) + 1.0 / (hn * h) + alpha_m / hn) * sweep.next[f]
                     - m / (han * hn) * sweep.after_next[f]
                     + sweep.start_force_term[f]
+                    + sweep.balance_row[f]
+                    - m / (hn * h) * sweep.balance_next[f]
+                    + m / (han * hn) * sweep.balance_after_next[f]
             })
             .collect();
         factor.solve_to_precision(&mut lambda)?;
@@ -558,8 +561,18 @@ impl Model {
             }
         }
 
+        // The balanced stiffness's weight: J moves by -w |b|^2 d kappa_0 through it.
+        let balance_weight = balance
+            .as_ref()
+            .map(|b| (b, b.weight(&lambda)))
+            .filter(|&(_, w)| w != 0.0);
         // The start force beta_K / h P F(z_k), the tendons out of the internal force (the
         // elastic term's part assembled beside the factorisation).
+        let start_hessian = if balance_weight.is_some() && k > 0 {
+            Some(HessianMode::Exact)
+        } else {
+            start_hessian
+        };
         let start_cables = self
             .has_cables()
             .then(|| self.internal_at(z0, CABLES, true, start_hessian));
@@ -596,6 +609,20 @@ impl Model {
             at_end[d] = -lambda[f];
             at_start[d] = beta_k / h * projected[f];
         }
+        let BalanceAdjoint {
+            weights: balance_weights,
+            next: balance_next,
+            row: balance_row,
+        } = match balance_weight {
+            Some((balance, w)) => self.balance_adjoint(
+                setup,
+                (balance, w),
+                (k, start, h),
+                start_elastic,
+                start_cables.as_ref(),
+            ),
+            None => BalanceAdjoint::none(n_free),
+        };
         if !dashpots.is_empty() {
             // at_end is -lambda: the coupling to the start enters lambda_{k-1}'s right-hand
             // side as +c / h dL/dz(z_k) (dL/dz(z_{k+1}) . lambda_k).
@@ -615,10 +642,22 @@ impl Model {
         // pass; the loads' (linear: the same at every state) are contracted once with the sum
         // of every step's weights (`Model::backward`).
         add_to(&mut sweep.load_weights, &at_end);
+        if let Some(weights) = &balance_weights {
+            add_to(&mut sweep.load_weights, weights);
+        }
+        // The internal terms' weights at z_k: the start force's and the balance's.
+        let start_weights = match (beta_k > 0.0, balance_weights) {
+            (true, Some(mut weights)) => {
+                add_to(&mut weights, &at_start);
+                Some(weights)
+            }
+            (true, None) => Some(at_start),
+            (false, weights) => weights,
+        };
         let scaled: Vec<f64> = at_end.iter().map(|v| scale * v).collect();
         let mut elastic_weights = scaled.clone();
-        if let Some(start_weights) = sweep.start_weights.take() {
-            add_to(&mut elastic_weights, &start_weights);
+        if let Some(later_start) = sweep.start_weights.take() {
+            add_to(&mut elastic_weights, &later_start);
         }
         for (i, (term, offsets)) in terms.iter().zip(&layout.term_offsets).enumerate() {
             match i {
@@ -628,19 +667,20 @@ impl Model {
                 _ => add_contraction(*term, offsets, z1, &at_end, &mut flat),
             }
             let start_too = i == 3 || (i == 0 && k == 0);
-            if start_too && beta_k > 0.0 {
-                add_contraction(*term, offsets, z0, &at_start, &mut flat);
+            if let (true, Some(weights)) = (start_too, &start_weights) {
+                add_contraction(*term, offsets, z0, weights, &mut flat);
             }
         }
         if k > 0 {
-            sweep.start_weights = (beta_k > 0.0).then_some(at_start);
+            sweep.start_weights = start_weights;
         }
         // The lumped mass: d(M a)/d rho_e = V_e / 4 a on each of the tet's nodes.
         let mut inertial = vec![0.0; z1.len()];
         for (f, &d) in setup.free.iter().enumerate().take(setup.n_displacement) {
             let acceleration =
                 (end.velocity[f] - start.velocity[f]) / h + alpha_m * end.velocity[f];
-            inertial[d] = -lambda[f] * acceleration;
+            // The balance's -M v_k / h, weighted by w b.
+            inertial[d] = -lambda[f] * acceleration - balance_next[f] * start.velocity[f] / h;
         }
         let (_, density_offset, _) = layout
             .blocks
@@ -698,6 +738,8 @@ impl Model {
         }
         sweep.after_next = std::mem::replace(&mut sweep.next, lambda);
         sweep.after_next_h = std::mem::replace(&mut sweep.next_h, h);
+        sweep.balance_after_next = std::mem::replace(&mut sweep.balance_next, balance_next);
+        sweep.balance_row = balance_row;
         Ok(())
     }
 }
@@ -713,6 +755,8 @@ struct FactoredStep {
     start_elastic: Evaluation,
     /// Which of the sweep's two factors holds its Hessian.
     slot: usize,
+    /// Its balanced barrier stiffness, where the derivatives follow it.
+    balance: Option<StiffnessBalance>,
 }
 
 /// What the backward sweep carries from step to step.
@@ -736,20 +780,13 @@ struct Sweep {
     start_weights: Option<Vec<f64>>,
     /// The sum over the steps so far of the loads' weights `-lambda_k` (full DOFs).
     load_weights: Vec<f64>,
+    /// Step k + 1's balanced stiffness (`balance`): `w (H_B (g + 2 kappa_0 b) + K b)` at
+    /// `z_{k+1}`, and `w b` of steps k + 1 and k + 2 (free DOFs, zero without one), with `w =
+    /// lambda . dr/d kappa_0 / |b|^2` their weights.
+    balance_row: Vec<f64>,
+    balance_next: Vec<f64>,
+    balance_after_next: Vec<f64>,
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Every state is kept while the run fits the budget; beyond it, checkpoints about
-    /// sqrt(steps) apart (1000 hammerbot steps fit, a run 10x longer does not).
-    #[test]
-    fn checkpoints_are_kept_within_the_memory_budget() {
-        let hammerbot_state = 2 * 3 * 2210;
-        assert_eq!(default_checkpoint_interval(1000, hammerbot_state), 1);
-        assert_eq!(default_checkpoint_interval(10_000, hammerbot_state), 100);
-        assert_eq!(default_checkpoint_interval(STATE_VALUES_BUDGET - 1, 1), 1);
-        assert_eq!(default_checkpoint_interval(STATE_VALUES_BUDGET, 1), 8192);
-    }
-}
+mod tests;

@@ -5,10 +5,38 @@
 use super::{ContactTerm, MAX_STIFFNESS_RATIO, STIFFNESS_UPDATE_SCALE};
 use crate::assembly::Assembler;
 use crate::contact::barrier::{
-    barrier_gradient, initial_barrier_stiffness, update_barrier_stiffness, StiffnessBounds,
+    balanced_barrier_stiffness, barrier_gradient, update_barrier_stiffness, StiffnessBounds,
 };
 use crate::contact::broad_phase::candidates;
-use crate::contact::potential::BarrierPotential;
+use crate::contact::potential::{BarrierPotential, StencilHessian};
+use crate::energy::HessianMode;
+
+/// The barrier at unit stiffness, `B(z) = sum_k b(d_k; dhat^2)` (J per J/m^4), at one state:
+/// its gradient on the body's node DOFs (`3 n_body`, m^4 per m) and, when asked for, its
+/// stencils' exact Hessians (over collision vertices; the obstacles' rows are not DOFs).
+#[derive(Clone, Debug, Default)]
+pub struct UnitBarrier {
+    pub gradient: Vec<f64>,
+    pub hessians: Vec<StencilHessian>,
+    /// Whether no stencil touches (the barrier is finite).
+    pub finite: bool,
+}
+
+impl UnitBarrier {
+    /// `H_B v` on the body's node DOFs (`v` and the result `3 n_body`).
+    pub fn hessian_product(&self, v: &[f64]) -> Vec<f64> {
+        let n = v.len();
+        let mut out = vec![0.0; n];
+        for stencil in &self.hessians {
+            for (row, col, value) in stencil.entries() {
+                if row < n && col < n {
+                    out[row] += value * v[col];
+                }
+            }
+        }
+        out
+    }
+}
 
 impl ContactTerm {
     /// The barrier stiffness of the current solve (J/m^4).
@@ -79,23 +107,57 @@ impl ContactTerm {
     }
 
     /// IPC's initial stiffness: the `kappa` within [`ContactTerm::stiffness_bounds`] whose barrier
-    /// gradient best balances `energy_gradient` (N, free DOFs) at `z`.
+    /// gradient best balances `energy_gradient` (N, free DOFs) at `z`. Records the balanced
+    /// value when it lies strictly inside the bounds ([`ContactTerm::balanced_stiffness`]).
     pub fn balance_stiffness(&mut self, assembler: &Assembler, z: &[f64], energy_gradient: &[f64]) {
+        self.balanced_stiffness = None;
+        let unit = self.unit_barrier(z, false);
+        if !unit.finite {
+            return;
+        }
+        let barrier = free_values(assembler, &unit.gradient);
+        let bounds = self.stiffness_bounds();
+        match balanced_barrier_stiffness(energy_gradient, &barrier) {
+            Some(kappa) if kappa > bounds.min && kappa < bounds.max => {
+                self.balanced_stiffness = Some(kappa);
+                self.stiffness = kappa;
+            }
+            Some(kappa) => self.stiffness = kappa.clamp(bounds.min, bounds.max),
+            None => self.stiffness = bounds.min,
+        }
+    }
+
+    /// The stiffness the last [`ContactTerm::balance_stiffness`] balanced when it lay strictly
+    /// inside the bounds (J/m^4): `-(grad B . g) / |grad B|^2`, a smooth function of the state
+    /// and of the other forces there. `None` when it was clamped or nothing was within `dhat`.
+    pub fn balanced_stiffness(&self) -> Option<f64> {
+        self.balanced_stiffness
+    }
+
+    /// The barrier at unit stiffness at the full DOF vector `z`, with the obstacles where they
+    /// are now (see [`UnitBarrier`]).
+    pub fn unit_barrier(&self, z: &[f64], hessian: bool) -> UnitBarrier {
         let unit = BarrierPotential::try_new(self.dhat, 1.0).expect("dhat > 0");
         let x = self.positions(z);
         let found = candidates(&self.mesh, &x, self.dhat);
-        let assembled = unit.assemble(&self.mesh, &found, &x, None);
-        let mut barrier = vec![0.0; assembler.n_free()];
-        for v in 0..self.rest.n_body() {
-            for k in 0..3 {
-                if let Some(f) = assembler.free_of_full(3 * v + k) {
-                    barrier[f] = assembled.gradient[3 * v + k];
-                }
-            }
-        }
-        if assembled.energy.is_finite() {
-            self.stiffness =
-                initial_barrier_stiffness(energy_gradient, &barrier, self.stiffness_bounds());
+        let mode = hessian.then_some(HessianMode::Exact);
+        let mut assembled = unit.assemble(&self.mesh, &found, &x, mode);
+        assembled.gradient.truncate(3 * self.rest.n_body());
+        UnitBarrier {
+            finite: assembled.energy.is_finite(),
+            gradient: assembled.gradient,
+            hessians: assembled.hessians,
         }
     }
+}
+
+/// The free DOFs' entries of `full` (the first DOFs of the full vector; the rest are 0).
+pub fn free_values(assembler: &Assembler, full: &[f64]) -> Vec<f64> {
+    let mut out = vec![0.0; assembler.n_free()];
+    for (d, &v) in full.iter().enumerate() {
+        if let Some(f) = assembler.free_of_full(d) {
+            out[f] = v;
+        }
+    }
+    out
 }

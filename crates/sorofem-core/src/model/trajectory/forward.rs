@@ -14,7 +14,9 @@
 //! with `H_k` the step's own Hessian at its converged end (the dashpots' and the contact
 //! barrier's in it; taut displacement-controlled tendons bordering it, their pulls held, as in
 //! [`crate::sensitivity`]), `K_F` the Hessian of the damped internal force and `D_k` the
-//! dashpots' force (`dashpot`). The initial state is data: it does not move with the parameters.
+//! dashpots' force (`dashpot`); a barrier stiffness balanced at the step's start adds
+//! `-2^m grad B(z_{k+1}) d kappa_0` (`balance`). The initial state is data: it does not move
+//! with the parameters.
 //! Cost: one extra factorisation per step and one solve per direction and step; memory: the
 //! positions' change of every frame and direction (`directions (steps + 1) 3 n` values).
 
@@ -56,9 +58,9 @@ impl Model {
     /// along it: `[direction][frame]`, 3 n values each (m per unit of the direction; frame 0
     /// is all zeros).
     ///
-    /// Contact and dashpots as in [`Model::trajectory_gradient`] (the barrier stiffness fixed
-    /// at each step's converged value), halved steps through their sub-steps; not
-    /// differentiated (an error names it): friction.
+    /// Contact and dashpots as in [`Model::trajectory_gradient`] (the balanced barrier
+    /// stiffness followed), halved steps through their sub-steps; not differentiated (an error
+    /// names it): friction.
     #[allow(clippy::too_many_arguments, clippy::type_complexity)]
     pub fn trajectory_sensitivity(
         &mut self,
@@ -130,6 +132,7 @@ impl Model {
                         let step_end = StepEnd {
                             tensions: &tensions,
                             barrier_stiffness: sub.barrier_stiffness,
+                            balanced_stiffness: sub.balanced_stiffness,
                             time: sub.end_time,
                         };
                         model.tangent_step(
@@ -204,7 +207,8 @@ impl Model {
         let n_free = setup.free.len();
         // The start force beta_K / h P F(z_k), the tendons out of the internal force: assembled
         // beside the factorisation.
-        let start_hessian = (beta_k > 0.0).then_some(HessianMode::Exact);
+        let balanced = step_end.balanced_stiffness.is_some();
+        let start_hessian = (beta_k > 0.0 || balanced).then_some(HessianMode::Exact);
         let (damped_force, dashpots, start_eval) =
             self.factor_step_end(setup, h, k, (z0, z1), step_end, |assembler, terms| {
                 let without_tendons = [true, true, false];
@@ -218,6 +222,22 @@ impl Model {
             })?;
         self.last_state = Some((z1.clone(), loads.clone()));
         let active = self.active_tendons()?;
+        // The balanced barrier stiffness (`balance`): its change is -(row . du_k - M b / (h
+        // h_{k-1}) . (du_k - du_{k-1}) + b . dg/dtheta delta) / |b|^2.
+        let balance = self.stiffness_balance(step_end, (z0, z1)).map(|balance| {
+            let stiffness_b = self
+                .assembler
+                .pattern()
+                .symmetric_matvec(&start_eval.hessian, &balance.start);
+            let row = self.balance_state_row(
+                setup,
+                &balance,
+                (start, h),
+                &start_eval.gradient,
+                &stiffness_b,
+            );
+            (balance, row)
+        });
         let load_terms = self.terms.loads(loads);
         let terms = self.terms.parameterised(&load_terms);
         let density_offset = layout
@@ -261,6 +281,22 @@ impl Model {
                 }
                 dashpots.add_start_product(&current, &mut dashpot_start);
             }
+            let kappa_change = balance.as_ref().map(|(balance, row)| {
+                let mut forces = vec![0.0; n_full];
+                for (term, offsets) in terms.iter().zip(&layout.term_offsets) {
+                    add_derivative_along(*term, offsets, z0, &tangent.delta, 1.0, &mut forces);
+                }
+                let mut along = dot(row, &tangent.current);
+                for (f, &d) in setup.free.iter().enumerate().take(setup.n_displacement) {
+                    let b = balance.start[f];
+                    let inertia = setup.mass[f] / (h * previous_h);
+                    along += b
+                        * (forces[d]
+                            - nodal_mass[d] * start.velocity[f] / h
+                            - inertia * (tangent.current[f] - tangent.previous[f]));
+                }
+                (&balance.end, balance.kappa_change(along))
+            });
             let start_stiffness = if beta_k > 0.0 {
                 self.assembler
                     .pattern()
@@ -292,7 +328,8 @@ impl Model {
                             0.0
                         }
                         + dashpot_start[d];
-                    previous - derivative
+                    let balance = kappa_change.map_or(0.0, |(end, change)| end[f] * change);
+                    previous - derivative - balance
                 })
                 .collect();
             self.factor.solve_in_place(&mut rhs);

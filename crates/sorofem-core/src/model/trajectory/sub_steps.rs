@@ -23,6 +23,9 @@ pub(super) struct SubStep {
     pub(super) end_time: f64,
     /// The barrier stiffness it converged with (J/m^4; 0 without contact).
     pub(super) barrier_stiffness: f64,
+    /// The stiffness balanced at its start where the derivatives follow it (J/m^4; see
+    /// [`Model::differentiated_balance`]).
+    pub(super) balanced_stiffness: Option<f64>,
 }
 
 impl Model {
@@ -72,6 +75,7 @@ impl Model {
                         h,
                         end_time,
                         barrier_stiffness: self.barrier_stiffness(),
+                        balanced_stiffness: self.differentiated_balance(),
                     };
                     each(self, &start, state, &sub)?;
                     done.push(sub);
@@ -93,7 +97,7 @@ impl Model {
 
     /// Time step `step = (s, commands)` of a differentiated run's forward pass, by
     /// [`Model::converged_sub_steps`] (deciding its halvings, `each` after every sub-step), with
-    /// its frame, iterations, halvings and balanced barrier stiffness added to `record`.
+    /// its frame, iterations, halvings and balanced barrier stiffnesses added to `record`.
     /// Returns its sub-steps.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn recorded_step(
@@ -106,7 +110,7 @@ impl Model {
         record: &mut RecordedPositions,
         mut each: impl FnMut(&mut Model, &StepState, &StepState, &SubStep) -> Result<()>,
     ) -> Result<Vec<SubStep>> {
-        let mut balanced = false;
+        let (mut balanced, mut followed) = (false, false);
         let (plan, iterations) = self.converged_sub_steps(
             setup,
             state,
@@ -116,13 +120,15 @@ impl Model {
             reuse,
             None,
             |model, start, end, sub| {
-                balanced |= model.balanced_in_contact(&end.z);
+                balanced |= model.held_balance_in_contact(&end.z);
+                followed |= sub.balanced_stiffness.is_some();
                 each(model, start, end, sub)
             },
         )?;
         record.iterations.push(iterations);
         record.positions.push(self.node_positions(&state.z));
         record.balanced_contact_steps += usize::from(balanced);
+        record.balanced_stiffness_steps += usize::from(followed);
         record.split_steps += usize::from(plan.len() > 1);
         Ok(plan)
     }
