@@ -587,13 +587,13 @@ class Body:
         adaptive_stiffness : bool or None
             Whether the barrier stiffness adapts as in IPC (balanced against the other forces at
             each time step's start and doubled while gaps keep shrinking, within ``[stiffness,
-            100 stiffness]``) or stays at ``stiffness``. Default ``True``. A fixed stiffness
-            makes every step a smooth function of the parameters and the state it starts from,
-            so that :func:`sorofem.trajectory_gradient` through contact is exact (with the
-            adaptive one it warns, :class:`sorofem.inverse.BarrierStiffnessWarning`, where a
-            balanced stiffness is held fixed). Without ``stiffness`` the fixed value is the
-            default one, taken from the material at the body's first solve: the derivatives
-            hold it there, as the body's later solves do.
+            100 stiffness]``) or stays at ``stiffness``. Default ``True``. Trajectory
+            derivatives (:func:`sorofem.trajectory_gradient`) follow the adaptive stiffness's
+            balance, except on a body with tendons, where they hold it and warn
+            (:class:`sorofem.inverse.BarrierStiffnessWarning`); a fixed stiffness is exact
+            there too. Without ``stiffness`` the reference is the default one, taken from the
+            material at the body's first solve: a constant of the body, which the derivatives
+            hold, as the body's later solves do.
 
         Raises
         ------

@@ -102,8 +102,8 @@ Schema
     # self_contact = true      # the body's boundary surface may touch itself (frictionless; its forces are part
                                # of the contact forces and sum to zero) (default false)
     adaptive_stiffness = true   # the barrier stiffness adapts as in IPC (balanced at each time step's start,
-                                # within [stiffness, 100 stiffness]); false keeps it at stiffness, which makes
-                                # trajectory gradients through contact exact
+                                # within [stiffness, 100 stiffness]); false keeps it at stiffness (trajectory
+                                # gradients through contact are exact with both, with tendons with false only)
 
     [dynamics]                 # optional: Integrate in time (implicit Euler, lumped mass; density > 0) instead of
                                # a static solve.

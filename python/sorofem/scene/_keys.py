@@ -380,8 +380,9 @@ _CONTACT = Table(
                               "are part of the contact forces and sum to zero)", default=False, example=True,
                               commented=True),
         "adaptive_stiffness": Field(Boolean(), "the barrier stiffness adapts as in IPC (balanced at each time "
-                                    "step's start, within [stiffness, 100 stiffness]); false keeps it at stiffness, "
-                                    "which makes trajectory gradients through contact exact", default=True),
+                                    "step's start, within [stiffness, 100 stiffness]); false keeps it at stiffness "
+                                    "(trajectory gradients through contact are exact with both, with tendons with "
+                                    "false only)", default=True),
     },
     doc="Contact settings: the [[obstacle]] entries' and the body's contact with itself (sorofem.Body.set_contact).",
 )
