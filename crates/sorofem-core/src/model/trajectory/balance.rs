@@ -47,8 +47,8 @@ pub(super) struct StiffnessBalance {
 }
 
 impl StiffnessBalance {
-    /// The weight `(lambda . dr_k/d kappa_0) / |b|^2` of the adjoint state `lambda` (free DOFs):
-    /// `dJ = w (|b|^2 d kappa_0)` up to sign, see [`Model::balance_state_row`].
+    /// The weight `w = (lambda . dr_k/d kappa_0) / |b|^2` of the adjoint state `lambda` (free
+    /// DOFs): through this step's balance J moves by `-w |b|^2 d kappa_0` ([`BalanceAdjoint`]).
     pub(super) fn weight(&self, lambda: &[f64]) -> f64 {
         dot(lambda, &self.end) / self.norm2
     }
