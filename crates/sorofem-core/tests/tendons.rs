@@ -199,6 +199,25 @@ fn tendon_length_energy_and_parameter_derivatives_match_central_differences() {
         1e-7,
         1e-10,
     );
+    // d2L/dz2 v: the derivative of dL/dz along v, by central differences.
+    let v = rng.vec(21, 1.0);
+    let mut product = vec![0.0; 21];
+    tendon.add_length_hessian_product(&z, 2.5, &v, &mut product);
+    for (i, &analytic) in product.iter().enumerate() {
+        check_directional(
+            &format!("tendon length Hessian product, row {i}"),
+            &z,
+            &v,
+            1e-6,
+            |x| {
+                let mut g = vec![0.0; 21];
+                tendon.add_length_gradient(x, 2.5, &mut g);
+                g[i]
+            },
+            analytic,
+            1e-6,
+        );
+    }
 }
 
 #[test]

@@ -88,6 +88,38 @@ impl Tendon {
     }
 }
 
+impl Tendon {
+    /// Adds `scale * d2L/dz2 v` to the full-DOF vector `out` (`v` full DOFs too): per segment
+    /// `(I - n_k n_k^T) / l_k (dy_{k+1} - dy_k)` on its end point's DOFs and its negative on
+    /// its start point's, `dy = W v` through the points' weights.
+    pub fn add_length_hessian_product(&self, z: &[f64], scale: f64, v: &[f64], out: &mut [f64]) {
+        let moved = |point: &super::cable::PointMap| -> Vector3<f64> {
+            let mut dy = Vector3::zeros();
+            for (&b, &weight) in point.dof_blocks.iter().zip(&point.weights) {
+                dy += weight * Vector3::new(v[b], v[b + 1], v[b + 2]);
+            }
+            dy
+        };
+        for w in self.points.windows(2) {
+            let d = w[1].position(z) - w[0].position(z);
+            let length = d.norm();
+            if length == 0.0 {
+                continue;
+            }
+            let n = d / length;
+            let change = moved(&w[1]) - moved(&w[0]);
+            let product = (change - n * n.dot(&change)) * (scale / length);
+            for (sign, point) in [(-1.0, &w[0]), (1.0, &w[1])] {
+                for (&b, &weight) in point.dof_blocks.iter().zip(&point.weights) {
+                    for i in 0..3 {
+                        out[b + i] += sign * weight * product[i];
+                    }
+                }
+            }
+        }
+    }
+}
+
 /// All segments of all tendons as one term: element = segment, with the stencil of a cable
 /// segment (24 DOFs). Energy `T l_k` (J), `T` the tendon's [`Tendon::tension`].
 pub struct TendonTerm {
