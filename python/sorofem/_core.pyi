@@ -163,7 +163,6 @@ def material_param_names(model: str, options: dict[str, Any] | None = None) -> l
 class _TrajectoryGradient(TypedDict):
     positions: _F
     iterations: list[int]
-    balanced_contact_steps: int
     balanced_stiffness_steps: int
     split_steps: int
     params: _ParamGradient
@@ -194,7 +193,6 @@ def trajectory_gradient(
 class _TrajectorySensitivity(TypedDict):
     positions: _F
     iterations: list[int]
-    balanced_contact_steps: int
     balanced_stiffness_steps: int
     split_steps: int
     dx: _F

@@ -588,12 +588,10 @@ class Body:
             Whether the barrier stiffness adapts as in IPC (balanced against the other forces at
             each time step's start and doubled while gaps keep shrinking, within ``[stiffness,
             100 stiffness]``) or stays at ``stiffness``. Default ``True``. Trajectory
-            derivatives (:func:`sorofem.trajectory_gradient`) follow the adaptive stiffness's
-            balance, except on a body with tendons, where they hold it and warn
-            (:class:`sorofem.inverse.BarrierStiffnessWarning`); a fixed stiffness is exact
-            there too. Without ``stiffness`` the reference is the default one, taken from the
-            material at the body's first solve: a constant of the body, which the derivatives
-            hold, as the body's later solves do.
+            derivatives (:func:`sorofem.trajectory_gradient`) are exact with both: they follow
+            the adaptive stiffness's balance. Without ``stiffness`` the reference is the
+            default one, taken from the material at the body's first solve: a constant of the
+            body, which the derivatives hold, as the body's later solves do.
 
         Raises
         ------

@@ -223,8 +223,7 @@ impl Run {
     }
 }
 
-/// {"positions" (frames, n, 3), "iterations", "balanced_contact_steps",
-/// "balanced_stiffness_steps", "split_steps"} of a
+/// {"positions" (frames, n, 3), "iterations", "balanced_stiffness_steps", "split_steps"} of a
 /// recorded trajectory.
 fn record_dict<'py>(
     py: Python<'py>,
@@ -239,7 +238,6 @@ fn record_dict<'py>(
         PyArray1::from_vec(py, positions).reshape([frames, n, 3])?,
     )?;
     out.set_item("iterations", record.iterations)?;
-    out.set_item("balanced_contact_steps", record.balanced_contact_steps)?;
     out.set_item("balanced_stiffness_steps", record.balanced_stiffness_steps)?;
     out.set_item("split_steps", record.split_steps)?;
     Ok(out)

@@ -63,7 +63,7 @@ from ._estimate_dynamics import DAMPING_PARAMETERS, MOTION_PARAMETERS, marker_tr
 from ._gradient import gradient
 from ._parameters import PARAMETERS, parameter_names
 from ._problem import DEFAULT_TOLERANCE
-from ._trajectory import TRAJECTORY_PARAMETERS, BarrierStiffnessWarning, TrajectoryGradientResult, trajectory_gradient
+from ._trajectory import TRAJECTORY_PARAMETERS, TrajectoryGradientResult, trajectory_gradient
 from .results import ControlResult, FitResult, GradientResult, Profile, Uncertainty
 
 __all__ = [
@@ -88,10 +88,9 @@ __all__ = [
     "Uncertainty",
     "Profile",
     "TornHistoryWarning",
-    "BarrierStiffnessWarning",
 ]
 
 # Documented (and pickled) as members of this package, whichever private module holds them.
 for _public in (gradient, trajectory_gradient, TrajectoryGradientResult, estimate, marker_tracks, control, parameter_names, GradientResult, FitResult, ControlResult, ScheduleResult, Uncertainty,
-                Profile, TornHistoryWarning, BarrierStiffnessWarning):
+                Profile, TornHistoryWarning):
     _public.__module__ = __name__

@@ -42,7 +42,7 @@ from ._analysis import profile as profile_along
 from ._optimizers import Recorder, bound_sides, levenberg_marquardt, scipy_minimize, uncertainty
 from ._parameters import COMMAND_PARAMETERS, Block, Parameters
 from ._problem import bind, fitted_material
-from ._trajectory import trajectory_gradient, warn_balanced_contact
+from ._trajectory import trajectory_gradient
 from .results import FitResult
 
 __all__ = ["estimate_dynamics", "marker_tracks", "DAMPING_PARAMETERS", "MOTION_PARAMETERS", "ESTIMATE_DYNAMICS_KEYS"]
@@ -371,7 +371,6 @@ class DynamicProblem:
         self.forward_solves += 1
         self.newton_iterations += int(np.sum(out["iterations"]))
         self._tick()
-        warn_balanced_contact(int(out["balanced_contact_steps"]), run["steps"])
         positions = np.asarray(out["positions"], dtype=np.float64).reshape(-1, n, 3)
         return positions, np.asarray(out["dx"], dtype=np.float64).reshape(len(directions), -1, n, 3)
 

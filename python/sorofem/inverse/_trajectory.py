@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import math
 import numbers
-import warnings
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
@@ -31,8 +30,7 @@ from ..targets import BoundTarget, Target
 from ._parameters import COMMAND_PARAMETERS, Parameters, core_sensitivities
 from ._problem import bind
 
-__all__ = ["trajectory_gradient", "TrajectoryGradientResult", "TRAJECTORY_PARAMETERS", "BarrierStiffnessWarning",
-           "warn_balanced_contact"]
+__all__ = ["trajectory_gradient", "TrajectoryGradientResult", "TRAJECTORY_PARAMETERS"]
 
 #: Names :func:`trajectory_gradient` takes besides those of :func:`sorofem.gradient` (the
 #: material's, ``density``, ``gravity``, ``cable_stiffness``): the Rayleigh coefficients, each
@@ -40,32 +38,6 @@ __all__ = ["trajectory_gradient", "TrajectoryGradientResult", "TRAJECTORY_PARAME
 #: whole schedule, and ``"keyframes:<cable>"`` for a cable whose schedule is a
 #: :class:`sorofem.dynamics.Keyframes` (the gradient by each keyframe's value).
 TRAJECTORY_PARAMETERS = ("mass_damping", "stiffness_damping", "cable_damping", "actuation", "keyframes:<cable>")
-
-class BarrierStiffnessWarning(UserWarning):
-    """Trajectory derivatives through contact follow IPC's adaptive barrier stiffness (balanced
-    at every step's start, doubled within it) except on a body with tendons: their tensions
-    enter the balance and are not differentiated, so there the stiffness is held at the value
-    each step converged with, and in steps that ended in contact with a stiffness balanced
-    inside its bounds its change with the parameters is missing (an error of the order of the
-    gap's change, a fraction of ``dhat``, against the motion).
-    ``body.set_contact(adaptive_stiffness=False)`` holds the stiffness fixed in the simulation
-    too, and the derivatives are then exact."""
-
-
-def warn_balanced_contact(steps: int, total: int) -> None:
-    """A :class:`BarrierStiffnessWarning` when ``steps`` of the ``total`` steps of a run ended in
-    contact with a balanced barrier stiffness."""
-    if steps > 0:
-        warnings.warn(
-            f"{steps} of {total} time steps ended in contact with a barrier stiffness balanced inside its bounds "
-            "on a body with tendons, whose tensions in the balance are not differentiated: the trajectory "
-            "derivatives hold the stiffness fixed there, so they are approximate; "
-            "body.set_contact(adaptive_stiffness=False) fixes it in the simulation too and makes them exact "
-            "(a stiffer barrier, body.set_contact(stiffness=...), or a smaller dhat makes the missing part smaller)",
-            BarrierStiffnessWarning,
-            stacklevel=3,
-        )
-
 
 #: Newton's relative tolerance of every step when none is given: :func:`sorofem.simulate`'s, so
 #: that the gradient is taken along the very trajectory the simulation returns. The adjoint
@@ -93,10 +65,6 @@ class TrajectoryGradientResult:
         along (``times[i] = i dt``).
     iterations
         Newton iterations of every step.
-    balanced_contact_steps
-        Steps that ended in contact with a barrier stiffness balanced inside its bounds that
-        the gradient holds fixed, so that it is approximate there (a body with tendons, see
-        :class:`BarrierStiffnessWarning`); 0 otherwise.
     balanced_stiffness_steps
         Steps whose barrier stiffness IPC balanced inside its bounds at their start (in
         contact there): the gradient follows its change with the parameters and the states.
@@ -111,7 +79,6 @@ class TrajectoryGradientResult:
     gradient: dict[str, Any]
     positions: NDArray[np.float64]
     iterations: NDArray[np.int64]
-    balanced_contact_steps: int = 0
     split_steps: int = 0
     balanced_stiffness_steps: int = 0
 
@@ -284,14 +251,6 @@ def trajectory_gradient(
     -------
     TrajectoryGradientResult
 
-    Warns
-    -----
-    BarrierStiffnessWarning
-        Some steps ended in contact with a barrier stiffness balanced inside its bounds: the
-        gradient holds it fixed there and is approximate. With
-        ``body.set_contact(adaptive_stiffness=False)`` the stiffness is fixed in the
-        simulation too, and the gradient through contact is exact.
-
     Examples
     --------
     >>> tip = body.mesh.nodes_on_plane((0.4, 0, 0), (1, 0, 0))           # doctest: +SKIP
@@ -379,7 +338,5 @@ def trajectory_gradient(
             hats = np.stack([np.interp(times, frames.times, np.eye(frames.values.size)[j])
                              for j in range(frames.values.size)])
             gradient[name] = hats @ per_step[:, c]
-    balanced = int(out["balanced_contact_steps"])
-    warn_balanced_contact(balanced, steps)
     return TrajectoryGradientResult(values[-1], gradient, np.asarray(out["positions"]), np.asarray(out["iterations"]),
-                                    balanced, int(out["split_steps"]), int(out["balanced_stiffness_steps"]))
+                                    int(out["split_steps"]), int(out["balanced_stiffness_steps"]))

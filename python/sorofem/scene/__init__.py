@@ -103,7 +103,7 @@ Schema
                                # of the contact forces and sum to zero) (default false)
     adaptive_stiffness = true   # the barrier stiffness adapts as in IPC (balanced at each time step's start,
                                 # within [stiffness, 100 stiffness]); false keeps it at stiffness (trajectory
-                                # gradients through contact are exact with both, with tendons with false only)
+                                # gradients through contact are exact with both)
 
     [dynamics]                 # optional: Integrate in time (implicit Euler, lumped mass; density > 0) instead of
                                # a static solve.

@@ -381,8 +381,7 @@ _CONTACT = Table(
                               commented=True),
         "adaptive_stiffness": Field(Boolean(), "the barrier stiffness adapts as in IPC (balanced at each time "
                                     "step's start, within [stiffness, 100 stiffness]); false keeps it at stiffness "
-                                    "(trajectory gradients through contact are exact with both, with tendons with "
-                                    "false only)", default=True),
+                                    "(trajectory gradients through contact are exact with both)", default=True),
     },
     doc="Contact settings: the [[obstacle]] entries' and the body's contact with itself (sorofem.Body.set_contact).",
 )

@@ -277,7 +277,7 @@ impl System<'_> {
 
     /// The gradient (N, free DOFs) of everything but contact at `z`: what the contact's
     /// initial stiffness balances.
-    fn gradient_without_contact(&self, z: &[f64]) -> Vec<f64> {
+    pub(super) fn gradient_without_contact(&self, z: &[f64]) -> Vec<f64> {
         let eval = self
             .model
             .assembler
@@ -740,8 +740,11 @@ impl System<'_> {
     /// The start of a load step (statics) or time step (dynamics): the friction lagged there
     /// (statics), the barrier stiffness balanced there (dynamics).
     fn start_contact(&mut self, z: &[f64]) {
-        let balance = self.contact.as_ref().and_then(|c| c.balance_at.as_deref());
-        let energy_gradient = balance.map(|at| (at.to_vec(), self.gradient_without_contact(at)));
+        let balance = self.contact.as_ref().and_then(|c| c.balance_at.clone());
+        let energy_gradient = balance.map(|at| {
+            let g = self.gradient_at_motor_tensions(&at);
+            (at, g)
+        });
         let (Some(term), Some(solve)) = (&mut self.model.terms.contact, &mut self.contact) else {
             return;
         };

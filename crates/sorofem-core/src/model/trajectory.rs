@@ -55,14 +55,15 @@ mod forward;
 mod reverse;
 mod step_end;
 mod sub_steps;
+mod sweep;
 
 pub use forward::TrajectoryDirection;
 
-use self::balance::{BalanceAdjoint, StiffnessBalance};
-use self::dashpot::StepDashpots;
-use self::reverse::{ReversedSubStep, ReversedSubSteps};
+use self::balance::BalanceAdjoint;
+use self::reverse::ReversedSubSteps;
 use self::step_end::{add_to, singular_step, CABLES, ELASTIC};
 use self::sub_steps::SubStep;
+use self::sweep::{FactoredStep, Sweep};
 use super::dynamics::{
     Damping, DynamicsOptions, StepMethod, StepSetup, StepState, MAX_CONTRACTION,
 };
@@ -113,10 +114,6 @@ pub struct TrajectoryGradient {
 pub struct RecordedPositions {
     pub positions: Vec<Vec<f64>>,
     pub iterations: Vec<usize>,
-    /// Steps that ended in contact with a barrier stiffness IPC balanced strictly inside its
-    /// bounds that the derivatives hold at its value, so that they miss its change with the
-    /// parameters there: those of a body with tendons (see `balance`); 0 otherwise.
-    pub balanced_contact_steps: usize,
     /// Steps with a barrier stiffness IPC balanced strictly inside its bounds at their start
     /// (some stencil within `dhat` there), whose change the derivatives follow (`balance`).
     pub balanced_stiffness_steps: usize,
@@ -153,9 +150,8 @@ impl Model {
     /// Contact (obstacles, self-contact) is differentiated without friction: the barrier at the
     /// step's end, with IPC's adaptive stiffness balanced at the step's start followed through
     /// its dependence on that start and on the parameters (its doublings within the step held;
-    /// `balance`). With tendons the balanced stiffness is held at each step's converged value
-    /// and such steps are counted ([`RecordedPositions::balanced_contact_steps`]). Spring
-    /// cables' dashpots are differentiated, their coefficients among the parameters.
+    /// `balance`). Spring cables' dashpots are differentiated, their coefficients among the
+    /// parameters.
     ///
     /// A step is halved as [`Model::simulate_with`] halves it (where Newton fails or a moving
     /// obstacle would run into the body over it: `sub_steps`), and the derivatives follow its
@@ -189,7 +185,6 @@ impl Model {
         let mut record = RecordedPositions {
             positions: vec![self.node_positions(&state.z)],
             iterations: Vec::with_capacity(steps),
-            balanced_contact_steps: 0,
             balanced_stiffness_steps: 0,
             split_steps: 0,
         };
@@ -360,6 +355,7 @@ impl Model {
             balance_row: vec![0.0; n_free],
             balance_next: vec![0.0; n_free],
             balance_after_next: vec![0.0; n_free],
+            balance_tensions: vec![0.0; self.n_cables()],
         };
         let mut stream = ReversedSubSteps::new(checkpoints, plans, actuation, every, dt);
         let mut factors = [self.factor.sibling()?, self.factor.sibling()?];
@@ -377,7 +373,7 @@ impl Model {
             let (z0, z1) = (&step.start.z, &step.end.z);
             let prepared =
                 self.prepare_step_end(setup, step.sub.h, (z0, z1), &step_end, elastic_end)?;
-            let balance = self.stiffness_balance(&step_end, (z0, z1));
+            let balance = self.stiffness_balance(&step_end, (z0, z1), &step.start_tensions);
             let nnz = self.assembler.pattern().nnz();
             if let Some(later) = &mut factored {
                 if later.start_elastic.hessian.len() != nnz {
@@ -544,14 +540,17 @@ impl Model {
             })
             .collect();
         factor.solve_to_precision(&mut lambda)?;
-        // Taut displacement-controlled tendons: lambda stays on their constraints, and
-        // dJ/d pull = -mu.
+        // Taut displacement-controlled tendons: lambda meets their constraints' rows with the
+        // next step's balance's dJ/dT (zero without one), and dJ/d pull = -mu.
         let active = self.active_tendons_at(z1, factor)?;
         let mut pull_gradients = Vec::new();
         if !active.is_empty() {
             let mu = schur_solve(
                 &active,
-                active.iter().map(|a| dot(&a.row, &lambda)).collect(),
+                active
+                    .iter()
+                    .map(|a| dot(&a.row, &lambda) - sweep.balance_tensions[a.cable])
+                    .collect(),
             )?;
             for (a, m) in active.iter().zip(&mu) {
                 for (l, s) in lambda.iter_mut().zip(&a.solved) {
@@ -645,6 +644,9 @@ impl Model {
         if let Some(weights) = &balance_weights {
             add_to(&mut sweep.load_weights, weights);
         }
+        // The commanded tensions' share of g at z_k (the pulled ones' is the multipliers').
+        let tendon_weights =
+            (balance_weights.clone()).filter(|_| !self.terms.tendons.tendons.is_empty());
         // The internal terms' weights at z_k: the start force's and the balance's.
         let start_weights = match (beta_k > 0.0, balance_weights) {
             (true, Some(mut weights)) => {
@@ -668,6 +670,9 @@ impl Model {
             }
             let start_too = i == 3 || (i == 0 && k == 0);
             if let (true, Some(weights)) = (start_too, &start_weights) {
+                add_contraction(*term, offsets, z0, weights, &mut flat);
+            }
+            if let (4, Some(weights)) = (i, &tendon_weights) {
                 add_contraction(*term, offsets, z0, weights, &mut flat);
             }
         }
@@ -740,52 +745,13 @@ impl Model {
         sweep.after_next_h = std::mem::replace(&mut sweep.next_h, h);
         sweep.balance_after_next = std::mem::replace(&mut sweep.balance_next, balance_next);
         sweep.balance_row = balance_row;
+        self.pulled_tension_weights(
+            balance_weight,
+            &at.start_tensions,
+            &mut sweep.balance_tensions,
+        );
         Ok(())
     }
-}
-
-/// A sub-step of the backward sweep whose Hessian is factorised, with what its adjoint step
-/// needs besides (see [`Model::prepare_step_end`]).
-struct FactoredStep {
-    step: ReversedSubStep,
-    damped_force: Vec<f64>,
-    dashpots: StepDashpots,
-    /// The elastic term's gradient and Hessian at the sub-step's start (exact; none at the
-    /// run's start without stiffness damping).
-    start_elastic: Evaluation,
-    /// Which of the sweep's two factors holds its Hessian.
-    slot: usize,
-    /// Its balanced barrier stiffness, where the derivatives follow it.
-    balance: Option<StiffnessBalance>,
-}
-
-/// What the backward sweep carries from step to step.
-struct Sweep {
-    flat: Vec<f64>,
-    actuation: Vec<Vec<f64>>,
-    mass_damping: f64,
-    stiffness_damping: f64,
-    cable_damping: Vec<f64>,
-    /// `lambda_{k+1}` and `lambda_{k+2}` (free DOFs), and the lengths of steps k + 1 and
-    /// k + 2 (s).
-    next: Vec<f64>,
-    after_next: Vec<f64>,
-    next_h: f64,
-    after_next_h: f64,
-    /// `beta_K / h K_F(z_{k+1}) P lambda_{k+1}` and the dashpots' `c / h dL/dz(z_{k+1})
-    /// (dL/dz(z_{k+2}) . lambda_{k+1})`.
-    start_force_term: Vec<f64>,
-    /// `beta_K / h P lambda_{k+1}` (full DOFs): the weights of the elastic force's parameter
-    /// derivatives at `z_{k+1}` as step k + 1's start force, contracted with step k's.
-    start_weights: Option<Vec<f64>>,
-    /// The sum over the steps so far of the loads' weights `-lambda_k` (full DOFs).
-    load_weights: Vec<f64>,
-    /// Step k + 1's balanced stiffness (`balance`): `w (H_B (g + 2 kappa_0 b) + K b)` at
-    /// `z_{k+1}`, and `w b` of steps k + 1 and k + 2 (free DOFs, zero without one), with `w =
-    /// lambda . dr/d kappa_0 / |b|^2` their weights.
-    balance_row: Vec<f64>,
-    balance_next: Vec<f64>,
-    balance_after_next: Vec<f64>,
 }
 
 #[cfg(test)]

@@ -89,4 +89,27 @@ impl System<'_> {
         let multipliers = self.constraints.multipliers(z);
         multipliers.iter().map(|&t| t != 0.0).collect()
     }
+
+    /// [`System::gradient_without_contact`] with the displacement-controlled tendons pulling
+    /// with the tensions of the last solve as their motors exert them (the terms take a
+    /// multiplier `T` as `T / (1 + beta_K / h)`, see [`System::tendon_scale`]).
+    pub(super) fn gradient_at_motor_tensions(&mut self, z: &[f64]) -> Vec<f64> {
+        let scale = self.tendon_scale();
+        let tendons = &mut self.model.terms.tendons.tendons;
+        let saved: Vec<f64> = self
+            .constraints
+            .tendons
+            .iter()
+            .map(|&t| tendons[t].tension)
+            .collect();
+        for &t in &self.constraints.tendons {
+            tendons[t].tension *= scale;
+        }
+        let g = self.gradient_without_contact(z);
+        let tendons = &mut self.model.terms.tendons.tendons;
+        for (&t, tension) in self.constraints.tendons.iter().zip(saved) {
+            tendons[t].tension = tension;
+        }
+        g
+    }
 }

@@ -3,11 +3,14 @@
 //! are at its end:
 //!
 //! ```text
-//! kappa_0 = -(b . g) / |b|^2,    b = grad B(z_k),    g = F(z_k) - f - M v_k / h   (b's rows)
+//! kappa_0 = -(b . g) / |b|^2,    b = grad B(z_k),
+//! g = F(z_k) + sum_t T_t dL_t/dz(z_k) - f - M v_k / h   (b's rows)
 //! ```
 //!
-//! with B the barrier at unit stiffness, F the elastic and spring-cable forces and f the loads
-//! (free DOFs). On the body's rows the step's other terms cancel at `z_k`: the mass damping
+//! with B the barrier at unit stiffness, F the elastic and spring-cable forces, f the loads
+//! (free DOFs) and `T_t` tendon t's tension as its motor exerts it at the step's start: its
+//! command under force control, the multiplier the sub-step before ended with under
+//! displacement control. On the body's rows the step's other terms cancel at `z_k`: the mass damping
 //! `alpha_M M (u - u_k) / h` vanishes there, the stiffness damping's start force is `beta_K / h
 //! F(z_k)` against the internal scale's `beta_K / h F(z_k)`, and the dashpots' force and its
 //! total derivative vanish. Newton doubles the stiffness m times while gaps keep shrinking (m is
@@ -15,20 +18,22 @@
 //! 2^m kappa_0`, or at the bound's maximum, where it no longer moves. The differential is
 //!
 //! ```text
-//! d kappa_0 = -[ (H_B(z_k) (g + 2 kappa_0 b) + K(z_k) b) . dz_k
-//!               - M b / (h h_{k-1}) . (du_k - du_{k-1}) + b . dg/dtheta dtheta ] / |b|^2
+//! d kappa_0 = -[ (H_B(z_k) (g + 2 kappa_0 b) + K(z_k) b + sum_t T_t d2L_t/dz2 b) . dz_k
+//!               - M b / (h h_{k-1}) . (du_k - du_{k-1}) + sum_t (b . dL_t/dz) dT_t
+//!               + b . dg/dtheta dtheta ] / |b|^2
 //! ```
 //!
 //! (`H_B` the barrier's exact Hessian, K the elastic and spring-cable Hessian, `v_k = (u_k -
-//! u_{k-1}) / h_{k-1}`), and the step's residual moves by `2^m grad B(z_{k+1}) d kappa_0`. Where
-//! the balance was clamped at a bound the stiffness is a constant and nothing is added. The
-//! tendons' forces in g (their tensions the last step's multipliers) are not differentiated:
-//! a run with tendons keeps such a step's stiffness held (and counts it).
+//! u_{k-1}) / h_{k-1}`; `dT_t` the change of a pulled tendon's multiplier at the end of the
+//! sub-step before, a commanded tension's being among dtheta), and the step's residual moves by
+//! `2^m grad B(z_{k+1}) d kappa_0`. Where the balance was clamped at a bound the stiffness is a
+//! constant and nothing is added.
 
 use super::step_end::add_to;
 use super::StepEnd;
 use crate::assembly::Evaluation;
 use crate::contact::{free_values, UnitBarrier};
+use crate::energy::TendonCommand;
 use crate::model::dynamics::{StepSetup, StepState};
 use crate::model::Model;
 use crate::sensitivity::dot;
@@ -44,6 +49,10 @@ pub(super) struct StiffnessBalance {
     pub(super) end: Vec<f64>,
     /// The barrier at `z_k`, its stencils' Hessians among it.
     barrier: UnitBarrier,
+    /// Each tendon's tension at `z_k` as its motor exerts it (N), and `b . dL/dz(z_k)` (m^3:
+    /// the balance's change per N of it).
+    tensions: Vec<f64>,
+    pub(super) tendon_rows: Vec<f64>,
 }
 
 impl StiffnessBalance {
@@ -92,30 +101,30 @@ impl BalanceAdjoint {
 
 impl Model {
     /// The stiffness the last step balanced strictly inside its bounds (J/m^4), which the
-    /// derivatives follow (`balance`); `None` with tendons, whose forces in the balance are
-    /// not differentiated (the stiffness is then held at its converged value).
+    /// derivatives follow.
     pub(super) fn differentiated_balance(&self) -> Option<f64> {
-        if !self.terms.tendons.tendons.is_empty() {
-            return None;
-        }
         self.terms.contact.as_ref()?.balanced_stiffness()
     }
 
-    /// Whether the last step's stiffness moves with the state but is held by the derivatives
-    /// (tendons, see [`Model::differentiated_balance`]), with some stencil within `dhat` at
-    /// its end `z` (see [`super::RecordedPositions::balanced_contact_steps`]).
-    pub(super) fn held_balance_in_contact(&self, z: &[f64]) -> bool {
-        let Some(contact) = &self.terms.contact else {
-            return false;
+    /// `dJ/dT` of each pulled tendon's multiplier at `z_k` through the balance `balance` with
+    /// weight `w` (per cable into `out`, N^-1 in J's unit: `w b . dL/dz`; zero for slack or
+    /// commanded tendons, and everywhere without a balance): the right-hand side of the step
+    /// before's constraint rows.
+    pub(super) fn pulled_tension_weights(
+        &self,
+        balance: Option<(&StiffnessBalance, f64)>,
+        start_tensions: &[f64],
+        out: &mut [f64],
+    ) {
+        out.fill(0.0);
+        let Some((balance, w)) = balance else {
+            return;
         };
-        if self.terms.tendons.tendons.is_empty()
-            || contact.balanced_stiffness().is_none()
-            || contact.stiffness() >= contact.stiffness_bounds().max
-        {
-            return false;
+        for (t, tendon) in self.terms.tendons.tendons.iter().enumerate() {
+            if matches!(tendon.command, TendonCommand::Pull(_)) && start_tensions[t] > 0.0 {
+                out[self.terms.tendons.cable_index(t)] = w * balance.tendon_rows[t];
+            }
         }
-        let forces = contact.forces(z);
-        forces.self_active + forces.active.iter().sum::<usize>() > 0
     }
 
     /// The share of the balance `balance` with weight `w` ([`StiffnessBalance::weight`]) of
@@ -152,10 +161,13 @@ impl Model {
     /// The balance of the sub-step ending at `end` (from `z0` to `z1`), with the obstacles where
     /// they are at its end (the caller has moved them); `None` where its stiffness does not
     /// move with the state: clamped, capped after doublings, not adaptive, or no contact.
+    /// `start_tensions`: the tendons' tensions at `z0` (the pulled ones' multipliers; commanded
+    /// ones are read from the commands set for the step).
     pub(super) fn stiffness_balance(
         &self,
         end: &StepEnd,
         (z0, z1): (&[f64], &[f64]),
+        start_tensions: &[f64],
     ) -> Option<StiffnessBalance> {
         let contact = self.terms.contact.as_ref()?;
         let kappa = end.balanced_stiffness?;
@@ -169,19 +181,43 @@ impl Model {
 
         let mut at_end = free_values(&self.assembler, &contact.unit_barrier(z1, false).gradient);
         at_end.iter_mut().for_each(|v| *v *= doubling);
+        let tendons = &self.terms.tendons.tendons;
+        let tensions: Vec<f64> = (tendons.iter().zip(start_tensions))
+            .map(|(tendon, &t)| match tendon.command {
+                TendonCommand::Tension(command) => command,
+                TendonCommand::Pull(_) => t,
+            })
+            .collect();
+        let b_full = {
+            let mut full = vec![0.0; z0.len()];
+            for (&d, &b) in self.assembler.full_of_free().iter().zip(&start) {
+                full[d] = b;
+            }
+            full
+        };
+        let tendon_rows = tendons
+            .iter()
+            .map(|tendon| {
+                let mut gradient = vec![0.0; z0.len()];
+                tendon.add_length_gradient(z0, 1.0, &mut gradient);
+                dot(&gradient, &b_full)
+            })
+            .collect();
         (norm2 > 0.0).then_some(StiffnessBalance {
             kappa,
             start,
             norm2,
             end: at_end,
             barrier,
+            tensions,
+            tendon_rows,
         })
     }
 
-    /// `H_B(z_k) (g + 2 kappa_0 b) + K(z_k) b` on the free DOFs: `|b|^2 d kappa_0`'s part along
-    /// `dz_k` besides the inertia (`-M b / (h h_{k-1})`, added by the callers, who know the
-    /// lengths). `forces`: F(z_k) (elastic and spring cables, free DOFs); `stiffness_b`:
-    /// `K(z_k) b`; `start` the sub-step's start state, `h` its length.
+    /// `H_B(z_k) (g + 2 kappa_0 b) + K(z_k) b + sum_t T_t d2L_t/dz2 b` on the free DOFs:
+    /// `|b|^2 d kappa_0`'s part along `dz_k` besides the inertia (`-M b / (h h_{k-1})`, added
+    /// by the callers, who know the lengths). `forces`: F(z_k) (elastic and spring cables, free
+    /// DOFs); `stiffness_b`: `K(z_k) b`; `start` the sub-step's start state, `h` its length.
     pub(super) fn balance_state_row(
         &self,
         setup: &StepSetup,
@@ -190,17 +226,29 @@ impl Model {
         forces: &[f64],
         stiffness_b: &[f64],
     ) -> Vec<f64> {
+        let z0 = &start.z;
+        let (mut tendon_force, mut tendon_product) = (vec![0.0; z0.len()], vec![0.0; z0.len()]);
+        let b_full = balance.start_full(setup, z0.len(), 1.0);
+        for (tendon, &tension) in self.terms.tendons.tendons.iter().zip(&balance.tensions) {
+            if tension != 0.0 {
+                tendon.add_length_gradient(z0, tension, &mut tendon_force);
+                tendon.add_length_hessian_product(z0, tension, &b_full, &mut tendon_product);
+            }
+        }
         let n3 = balance.barrier.gradient.len();
         let mut shifted = vec![0.0; n3];
         for (f, &d) in setup.free.iter().enumerate().take(setup.n_displacement) {
             if d < n3 {
-                let g = forces[f] - setup.full_load[d] - setup.mass[f] * start.velocity[f] / h;
+                let g = forces[f] + tendon_force[d]
+                    - setup.full_load[d]
+                    - setup.mass[f] * start.velocity[f] / h;
                 shifted[d] = g + 2.0 * balance.kappa * balance.start[f];
             }
         }
         let product = balance.barrier.hessian_product(&shifted);
         let mut row = stiffness_b.to_vec();
         for (f, &d) in setup.free.iter().enumerate() {
+            row[f] += tendon_product[d];
             if d < n3 {
                 row[f] += product[d];
             }

@@ -21,7 +21,7 @@
 //! positions' change of every frame and direction (`directions (steps + 1) 3 n` values).
 
 use super::{RecordedPositions, StepEnd};
-use crate::energy::HessianMode;
+use crate::energy::{HessianMode, TendonCommand};
 use crate::error::{Error, Result};
 use crate::model::dynamics::{Damping, StepMethod, StepSetup, StepState, MAX_CONTRACTION};
 use crate::model::system::FactorReuse;
@@ -50,6 +50,9 @@ struct Tangent {
     cable_damping: Vec<f64>,
     current: Vec<f64>,
     previous: Vec<f64>,
+    /// The change of each pulled tendon's multiplier at the last frame (per cable, N; zero
+    /// where slack).
+    tension_change: Vec<f64>,
 }
 
 impl Model {
@@ -103,6 +106,7 @@ impl Model {
                     cable_damping,
                     current: vec![0.0; n_free],
                     previous: vec![0.0; n_free],
+                    tension_change: vec![0.0; n_cables],
                 })
             })
             .collect::<Result<Vec<_>>>()?;
@@ -117,8 +121,10 @@ impl Model {
                 self.start_of_run(&setup, initial_positions, initial_velocities)?;
             record.positions.push(self.node_positions(&state.z));
             let mut reuse = FactorReuse::new(MAX_CONTRACTION);
-            // The length of the sub-step before (the run's first has no predecessor: du_0 = 0).
+            // The length of the sub-step before (the run's first has no predecessor: du_0 = 0)
+            // and the tendons' tensions where it ended.
             let mut previous_h = dt;
+            let mut start_tensions = self.tendon_tensions();
             for (s, commands) in actuation.iter().enumerate() {
                 self.recorded_step(
                     &setup,
@@ -141,12 +147,13 @@ impl Model {
                             &layout,
                             (sub.h, previous_h),
                             s,
-                            start,
+                            (start, &start_tensions),
                             end,
                             &step_end,
                             &mut tangents,
                         )?;
                         previous_h = sub.h;
+                        start_tensions.clone_from(&tensions);
                         // The next step's solve starts from the tensions it solved for, not
                         // the scaled ones.
                         for (tendon, &t) in model.terms.tendons.tendons.iter_mut().zip(&tensions) {
@@ -193,7 +200,7 @@ impl Model {
         layout: &ParamLayout,
         (h, previous_h): (f64, f64),
         k: usize,
-        start: &StepState,
+        (start, start_tensions): (&StepState, &[f64]),
         end: &StepState,
         step_end: &StepEnd,
         tangents: &mut [Tangent],
@@ -224,7 +231,7 @@ impl Model {
         let active = self.active_tendons()?;
         // The balanced barrier stiffness (`balance`): its change is -(row . du_k - M b / (h
         // h_{k-1}) . (du_k - du_{k-1}) + b . dg/dtheta delta) / |b|^2.
-        let balance = self.stiffness_balance(step_end, (z0, z1)).map(|balance| {
+        let balance = (self.stiffness_balance(step_end, (z0, z1), start_tensions)).map(|balance| {
             let stiffness_b = self
                 .assembler
                 .pattern()
@@ -287,6 +294,12 @@ impl Model {
                     add_derivative_along(*term, offsets, z0, &tangent.delta, 1.0, &mut forces);
                 }
                 let mut along = dot(row, &tangent.current);
+                for (t, tendon) in self.terms.tendons.tendons.iter().enumerate() {
+                    if matches!(tendon.command, TendonCommand::Pull(_)) && start_tensions[t] > 0.0 {
+                        let cable = self.terms.tendons.cable_index(t);
+                        along += balance.tendon_rows[t] * tangent.tension_change[cable];
+                    }
+                }
                 for (f, &d) in setup.free.iter().enumerate().take(setup.n_displacement) {
                     let b = balance.start[f];
                     let inertia = setup.mass[f] / (h * previous_h);
@@ -333,6 +346,8 @@ impl Model {
                 })
                 .collect();
             self.factor.solve_in_place(&mut rhs);
+            // The multipliers' change dT (H du + A^T dT = rhs, A du = 0).
+            tangent.tension_change.fill(0.0);
             if !active.is_empty() {
                 let multipliers =
                     schur_solve(&active, active.iter().map(|a| dot(&a.row, &rhs)).collect())?;
@@ -340,6 +355,7 @@ impl Model {
                     for (x, s) in rhs.iter_mut().zip(&a.solved) {
                         *x -= mu * s;
                     }
+                    tangent.tension_change[a.cable] = *mu;
                 }
             }
             tangent.previous = std::mem::replace(&mut tangent.current, rhs);

@@ -20,7 +20,8 @@ pub(super) struct ReversedSubStep {
     pub(super) sub: SubStep,
     pub(super) start: StepState,
     pub(super) end: StepState,
-    /// The tendons' tensions at its end.
+    /// The tendons' tensions at its start and at its end.
+    pub(super) start_tensions: Vec<f64>,
     pub(super) tensions: Vec<f64>,
 }
 
@@ -93,6 +94,7 @@ impl<'a> ReversedSubSteps<'a> {
             sub,
             start: self.states[i].0.clone(),
             end: end.clone(),
+            start_tensions: self.states[i].1.clone(),
             tensions: tensions.clone(),
         }))
     }

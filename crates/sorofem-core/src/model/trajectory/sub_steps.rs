@@ -110,7 +110,7 @@ impl Model {
         record: &mut RecordedPositions,
         mut each: impl FnMut(&mut Model, &StepState, &StepState, &SubStep) -> Result<()>,
     ) -> Result<Vec<SubStep>> {
-        let (mut balanced, mut followed) = (false, false);
+        let mut followed = false;
         let (plan, iterations) = self.converged_sub_steps(
             setup,
             state,
@@ -120,14 +120,12 @@ impl Model {
             reuse,
             None,
             |model, start, end, sub| {
-                balanced |= model.held_balance_in_contact(&end.z);
                 followed |= sub.balanced_stiffness.is_some();
                 each(model, start, end, sub)
             },
         )?;
         record.iterations.push(iterations);
         record.positions.push(self.node_positions(&state.z));
-        record.balanced_contact_steps += usize::from(balanced);
         record.balanced_stiffness_steps += usize::from(followed);
         record.split_steps += usize::from(plan.len() > 1);
         Ok(plan)
