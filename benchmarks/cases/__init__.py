@@ -11,6 +11,7 @@ from . import dynamics  # noqa: F401
 from . import realtime  # noqa: F401  (the fast step mode against the clock)
 from . import adjoint  # noqa: F401
 from . import trajectory  # noqa: F401  (the adjoint through time)
+from . import trajectory_contact  # noqa: F401  (the adjoint through time and contact)
 from . import contact  # noqa: F401  (the cantilever on a floor, with and without it)
 from . import contact_finger  # noqa: F401  (a finger on a ball; self-contact on and off)
 from . import contact_peer  # noqa: F401  (the contact pass against ipctk)
