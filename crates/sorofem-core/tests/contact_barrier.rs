@@ -469,3 +469,57 @@ fn assembled_gradient_and_hessian_match_finite_differences() {
         1e-2,
     );
 }
+
+/// A contact term's barrier at unit stiffness (what IPC's balanced stiffness and its
+/// derivatives read): its Hessian over the body's DOFs, applied by `hessian_product` to each
+/// unit vector, against central differences of its gradient, for a block within `dhat` of a
+/// tilted plane below and a sphere above (the obstacles' rows are not DOFs and are left out).
+#[test]
+fn unit_barrier_hessian_product_matches_central_differences() {
+    use sorofem_core::contact::{ContactSetup, ContactTerm, ObstacleSpec};
+    use sorofem_core::TetMesh;
+    let lift = 2e-4;
+    let mesh = TetMesh::box_mesh([0.1; 3], [3; 3], [0.0, 0.0, lift]).unwrap();
+    let obstacle = |obstacle| ObstacleSpec {
+        obstacle,
+        friction: 0.0,
+        path: Vec::new(),
+    };
+    let radius = 0.02;
+    let setup = ContactSetup {
+        obstacles: vec![
+            obstacle(Obstacle::Plane(
+                Plane::try_new([0.0, 0.0, 0.0], [0.002, 0.001, 1.0]).unwrap(),
+            )),
+            obstacle(Obstacle::Sphere(
+                Sphere::try_new([0.05, 0.05, 0.1 + lift + 3e-4 + radius], radius).unwrap(),
+            )),
+        ],
+        dhat: Some(1e-3),
+        ..Default::default()
+    };
+    let term = ContactTerm::try_new(&mesh, setup).unwrap();
+    let mut rng = Rng::new(11);
+    let n3 = 3 * mesh.n_nodes();
+    let z = rng.vec(n3, 2e-5);
+    let at = term.unit_barrier(&z, true);
+    assert!(at.finite && at.hessians.len() > 4, "too little within dhat");
+    // Column j of the Hessian is its product with the unit vector e_j (row-major: symmetric).
+    let mut hessian = vec![0.0; n3 * n3];
+    for j in 0..n3 {
+        let mut unit = vec![0.0; n3];
+        unit[j] = 1.0;
+        for (i, value) in at.hessian_product(&unit).into_iter().enumerate() {
+            hessian[i * n3 + j] = value;
+        }
+    }
+    check_jacobian(
+        "unit barrier Hessian",
+        &z,
+        1e-8,
+        |x| term.unit_barrier(x, false).gradient,
+        &hessian,
+        1e-5,
+        0.0,
+    );
+}
