@@ -120,11 +120,23 @@ impl Model {
         let Some((balance, w)) = balance else {
             return;
         };
-        for (t, tendon) in self.terms.tendons.tendons.iter().enumerate() {
-            if matches!(tendon.command, TendonCommand::Pull(_)) && start_tensions[t] > 0.0 {
-                out[self.terms.tendons.cable_index(t)] = w * balance.tendon_rows[t];
-            }
+        for (t, cable) in self.taut_pulls(start_tensions) {
+            out[cable] = w * balance.tendon_rows[t];
         }
+    }
+
+    /// The pulled tendons taut at a sub-step's start (`start_tensions`: their multipliers
+    /// there), as (tendon, cable): those whose multiplier the balance reads as a state.
+    pub(super) fn taut_pulls<'a>(
+        &'a self,
+        start_tensions: &'a [f64],
+    ) -> impl Iterator<Item = (usize, usize)> + 'a {
+        let term = &self.terms.tendons;
+        (term.tendons.iter().enumerate())
+            .filter(move |(t, tendon)| {
+                matches!(tendon.command, TendonCommand::Pull(_)) && start_tensions[*t] > 0.0
+            })
+            .map(|(t, _)| (t, term.cable_index(t)))
     }
 
     /// The share of the balance `balance` with weight `w` ([`StiffnessBalance::weight`]) of

@@ -21,7 +21,7 @@
 //! positions' change of every frame and direction (`directions (steps + 1) 3 n` values).
 
 use super::{RecordedPositions, StepEnd};
-use crate::energy::{HessianMode, TendonCommand};
+use crate::energy::HessianMode;
 use crate::error::{Error, Result};
 use crate::model::dynamics::{Damping, StepMethod, StepSetup, StepState, MAX_CONTRACTION};
 use crate::model::system::FactorReuse;
@@ -294,11 +294,8 @@ impl Model {
                     add_derivative_along(*term, offsets, z0, &tangent.delta, 1.0, &mut forces);
                 }
                 let mut along = dot(row, &tangent.current);
-                for (t, tendon) in self.terms.tendons.tendons.iter().enumerate() {
-                    if matches!(tendon.command, TendonCommand::Pull(_)) && start_tensions[t] > 0.0 {
-                        let cable = self.terms.tendons.cable_index(t);
-                        along += balance.tendon_rows[t] * tangent.tension_change[cable];
-                    }
+                for (t, cable) in self.taut_pulls(start_tensions) {
+                    along += balance.tendon_rows[t] * tangent.tension_change[cable];
                 }
                 for (f, &d) in setup.free.iter().enumerate().take(setup.n_displacement) {
                     let b = balance.start[f];
