@@ -200,19 +200,12 @@ impl Model {
                 TendonCommand::Pull(_) => t,
             })
             .collect();
-        let b_full = {
-            let mut full = vec![0.0; z0.len()];
-            for (&d, &b) in self.assembler.full_of_free().iter().zip(&start) {
-                full[d] = b;
-            }
-            full
-        };
         let tendon_rows = tendons
             .iter()
             .map(|tendon| {
                 let mut gradient = vec![0.0; z0.len()];
                 tendon.add_length_gradient(z0, 1.0, &mut gradient);
-                dot(&gradient, &b_full)
+                dot(&free_values(&self.assembler, &gradient), &start)
             })
             .collect();
         (norm2 > 0.0).then_some(StiffnessBalance {
